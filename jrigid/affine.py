@@ -1,0 +1,573 @@
+"""Homogeneous affine transforms in 2D (3×3) and 3D (4×4), and simple cameras.
+
+Implements chapter 17.1–17.7 (2D), 17.9 (3D) and, through :mod:`jrigid.quaternion`,
+the rotations of 17.11–17.17.
+
+Conventions
+-----------
+* A transform ``T`` of shape ``(..., n+1, n+1)`` (``n`` = 2 or 3) acts on homogeneous
+  column vectors: ``X' = T @ X``. Its blocks are ``T = [[A, d], [0, 1]]`` (17.7, 17.9):
+  ``A`` rotates, scales and shears, ``d`` translates.
+* ``compose(A, B)`` is the matrix product ``A @ B``: ``B`` is applied first.
+* Points carry ``w = 1`` and feel the translation; vectors (differences of points)
+  carry ``w = 0`` and do not (text after 17.7).
+* Rotation matrices are active, ``v' = R @ v``; a positive 2D angle turns
+  counter-clockwise (17.1).
+* Leading batch dimensions broadcast. Every function is jit/vmap/grad-able.
+
+Errors
+------
+Wrong shapes raise ``ValueError`` while tracing, so also inside ``jax.jit``.
+Bad values (a singular matrix passed to :func:`inverse`, a zero-length look direction)
+raise ``ValueError`` when the arguments are concrete; under ``jax.jit``/``vmap`` the same
+check runs through ``equinox.error_if`` and raises a runtime error carrying the message.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from jrigid import quaternion as quat
+
+__all__ = [
+    "about_point",
+    "apply",
+    "apply_to_points",
+    "apply_to_vectors",
+    "compose",
+    "from_blocks",
+    "from_homogeneous",
+    "inverse",
+    "inverse_rigid",
+    "look_at",
+    "orthographic",
+    "perspective",
+    "rotation_2d",
+    "rotation_3d",
+    "rotation_3d_axis_angle",
+    "rotation_3d_euler",
+    "scaling",
+    "shear_2d",
+    "shear_3d",
+    "to_blocks",
+    "to_homogeneous",
+    "translation",
+]
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _float(x) -> jax.Array:
+    x = jnp.asarray(x)
+    if not jnp.issubdtype(x.dtype, jnp.floating):
+        x = x.astype(jnp.result_type(float))
+    return x
+
+
+def _fail_if(x, bad, message: str, detail: Callable[[], str] | None = None):
+    """Raise ``ValueError`` if any of ``bad`` holds; under tracing use ``eqx.error_if``."""
+    try:
+        is_bad = bool(jnp.any(bad))
+    except jax.errors.ConcretizationTypeError:
+        return eqx.error_if(x, bad, message)
+    if is_bad:
+        raise ValueError(message + (f" ({detail()})" if detail is not None else ""))
+    return x
+
+
+def _matrix(rows) -> jax.Array:
+    """Stack a nested list of equally batched scalars ``(...)`` into ``(..., r, c)``."""
+    flat = jnp.broadcast_arrays(*[_float(e) for row in rows for e in row])
+    ncol = len(rows[0])
+    stacked = jnp.stack(flat, axis=-1)
+    return stacked.reshape(stacked.shape[:-1] + (len(rows), ncol))
+
+
+def _dim_of_vector(x: jax.Array, name: str) -> int:
+    if x.ndim < 1 or x.shape[-1] not in (2, 3):
+        raise ValueError(f"{name} must have shape (..., 2) or (..., 3), got {x.shape}")
+    return x.shape[-1]
+
+
+def _dim_of_transform(T: jax.Array, name: str = "T") -> int:
+    if T.ndim < 2 or T.shape[-1] != T.shape[-2] or T.shape[-1] not in (3, 4):
+        raise ValueError(f"{name} must have shape (..., 3, 3) or (..., 4, 4), got {T.shape}")
+    return T.shape[-1] - 1
+
+
+def _check_vector3(x: jax.Array, name: str) -> None:
+    if x.ndim < 1 or x.shape[-1] != 3:
+        raise ValueError(f"{name} must have shape (..., 3), got {x.shape}")
+
+
+# --------------------------------------------------------------------------- building blocks
+
+
+def from_blocks(A, d) -> jax.Array:
+    """Assemble the homogeneous matrix ``[[A, d], [0, 1]]`` (17.7, 17.9).
+
+    Args:
+        A: linear part, ``(..., n, n)`` with ``n`` = 2 or 3.
+        d: translation, ``(..., n)``.
+
+    Returns:
+        ``(..., n+1, n+1)``; batch dimensions of ``A`` and ``d`` broadcast.
+    """
+    A, d = _float(A), _float(d)
+    n = _dim_of_vector(d, "d")
+    if A.ndim < 2 or A.shape[-2:] != (n, n):
+        raise ValueError(f"A must have shape (..., {n}, {n}) to match d {d.shape}, got {A.shape}")
+    batch = jnp.broadcast_shapes(A.shape[:-2], d.shape[:-1])
+    dtype = jnp.result_type(A, d)
+    A = jnp.broadcast_to(A, batch + (n, n)).astype(dtype)
+    d = jnp.broadcast_to(d, batch + (n,)).astype(dtype)
+    top = jnp.concatenate([A, d[..., None]], axis=-1)
+    bottom = jnp.broadcast_to(jnp.eye(1, n + 1, n, dtype=dtype), batch + (1, n + 1))
+    return jnp.concatenate([top, bottom], axis=-2)
+
+
+def to_blocks(T) -> tuple[jax.Array, jax.Array]:
+    """Split ``T`` of shape ``(..., n+1, n+1)`` into ``A (..., n, n)`` and ``d (..., n)`` (17.7)."""
+    T = _float(T)
+    n = _dim_of_transform(T)
+    return T[..., :n, :n], T[..., :n, n]
+
+
+def translation(d) -> jax.Array:
+    """Translation by ``d`` (17.3 in homogeneous form, 17.5; 3D: 17.9 with ``R = 1``).
+
+    Args:
+        d: ``(..., 2)`` or ``(..., 3)``.
+
+    Returns:
+        ``(..., 3, 3)`` or ``(..., 4, 4)``.
+    """
+    d = _float(d)
+    n = _dim_of_vector(d, "d")
+    return from_blocks(jnp.eye(n, dtype=d.dtype), d)
+
+
+def scaling(s) -> jax.Array:
+    """Scaling of the coordinates by the factors ``s`` about the origin (17.2, homogeneous).
+
+    Args:
+        s: per-axis factors ``(..., 2)`` or ``(..., 3)``.
+
+    Returns:
+        ``(..., 3, 3)`` or ``(..., 4, 4)``.
+    """
+    s = _float(s)
+    n = _dim_of_vector(s, "s")
+    A = s[..., :, None] * jnp.broadcast_to(jnp.eye(n, dtype=s.dtype), s.shape[:-1] + (n, n))
+    return from_blocks(A, jnp.zeros(n, dtype=s.dtype))
+
+
+def shear_2d(kx, ky=0.0) -> jax.Array:
+    """2D shear (skew): ``x' = x + kx y``, ``y' = y + ky x`` (17.6 has ``kx = 0.2``).
+
+    Args:
+        kx, ky: shear factors, ``(...)``; they broadcast.
+
+    Returns:
+        ``(..., 3, 3)``.
+    """
+    kx, ky = _float(kx), _float(ky)
+    one, zero = jnp.ones_like(kx), jnp.zeros_like(kx)
+    return _matrix([[one, kx, zero], [ky, one, zero], [zero, zero, one]])
+
+
+def shear_3d(xy=0.0, xz=0.0, yx=0.0, yz=0.0, zx=0.0, zy=0.0) -> jax.Array:
+    """3D shear, the extension of 17.6: ``x' = x + xy·y + xz·z``, ``y' = y + yx·x + yz·z``, ….
+
+    Args:
+        xy, xz, yx, yz, zx, zy: shear factors, ``(...)``; they broadcast.
+
+    Returns:
+        ``(..., 4, 4)``.
+    """
+    xy = _float(xy)
+    one, zero = jnp.ones_like(xy), jnp.zeros_like(xy)
+    return _matrix(
+        [
+            [one, xy, xz, zero],
+            [yx, one, yz, zero],
+            [zx, zy, one, zero],
+            [zero, zero, zero, one],
+        ]
+    )
+
+
+def about_point(T, pivot) -> jax.Array:
+    """Make the linear part of ``T`` act about ``pivot`` instead of the origin.
+
+    Returns ``translation(pivot) @ T @ translation(-pivot)``: translate the pivot to the
+    origin, apply ``T``, translate back (Exercise 17.2b). For a rotation the pivot is fixed.
+
+    Args:
+        T: ``(..., n+1, n+1)``.
+        pivot: ``(..., n)``.
+
+    Returns:
+        ``(..., n+1, n+1)``.
+    """
+    T, pivot = _float(T), _float(pivot)
+    n = _dim_of_transform(T)
+    if pivot.ndim < 1 or pivot.shape[-1] != n:
+        raise ValueError(
+            f"pivot must have shape (..., {n}) to match T {T.shape}, got {pivot.shape}"
+        )
+    return translation(pivot) @ T @ translation(-pivot)
+
+
+def _maybe_about(T: jax.Array, pivot) -> jax.Array:
+    return T if pivot is None else about_point(T, pivot)
+
+
+def rotation_2d(angle, pivot=None) -> jax.Array:
+    """Counter-clockwise rotation by ``angle`` (17.1 in homogeneous form, 17.7).
+
+    Args:
+        angle: radians, ``(...)``. The chapter's "30° clockwise" is ``-π/6``.
+        pivot: optional centre of rotation ``(..., 2)``; default the origin.
+
+    Returns:
+        ``(..., 3, 3)``.
+    """
+    angle = _float(angle)
+    c, s = jnp.cos(angle), jnp.sin(angle)
+    one, zero = jnp.ones_like(c), jnp.zeros_like(c)
+    T = _matrix([[c, -s, zero], [s, c, zero], [zero, zero, one]])
+    return _maybe_about(T, pivot)
+
+
+def rotation_3d(q, pivot=None) -> jax.Array:
+    """Rotation by the unit quaternion ``q`` (17.9 with the active form of 17.28).
+
+    Args:
+        q: ``(..., 4)`` scalar first, body → space.
+        pivot: optional centre of rotation ``(..., 3)``; default the origin.
+
+    Returns:
+        ``(..., 4, 4)`` whose upper-left block is ``quaternion.to_matrix(q)``.
+    """
+    q = _float(q)
+    if q.ndim < 1 or q.shape[-1] != 4:
+        raise ValueError(f"q must have shape (..., 4), got {q.shape}")
+    R = quat.to_matrix(q)
+    T = from_blocks(R, jnp.zeros(3, dtype=R.dtype))
+    return _maybe_about(T, pivot)
+
+
+def rotation_3d_axis_angle(axis, angle, pivot=None) -> jax.Array:
+    """Rotation by ``angle`` about ``axis`` (the Rodrigues matrix 17.17, via quaternions 17.25).
+
+    Args:
+        axis: ``(..., 3)``, need not be normalised.
+        angle: radians, ``(...)``; right-hand rule about ``axis``.
+        pivot: optional point on the rotation axis ``(..., 3)``; default the origin.
+
+    Returns:
+        ``(..., 4, 4)``.
+    """
+    axis = _float(axis)
+    _check_vector3(axis, "axis")
+    return rotation_3d(quat.from_axis_angle(axis, _float(angle)), pivot)
+
+
+def rotation_3d_euler(seq: str, angles, pivot=None) -> jax.Array:
+    """Rotation from Euler angles with scipy's meaning of ``seq`` (17.10 is the passive "ZXZ").
+
+    Args:
+        seq: three axes, upper case intrinsic, lower case extrinsic, e.g. ``"ZXZ"``.
+        angles: radians ``(..., 3)``.
+        pivot: optional centre of rotation ``(..., 3)``.
+
+    Returns:
+        ``(..., 4, 4)``.
+    """
+    angles = _float(angles)
+    _check_vector3(angles, "angles")
+    return rotation_3d(quat.from_euler(seq, angles), pivot)
+
+
+# --------------------------------------------------------------------------- algebra
+
+
+def compose(*transforms) -> jax.Array:
+    """Matrix product ``T1 @ T2 @ … @ Tk``: the rightmost transform is applied first.
+
+    Args:
+        *transforms: one or more ``(..., n+1, n+1)`` of the same ``n``; batches broadcast.
+
+    Returns:
+        ``(..., n+1, n+1)``.
+    """
+    if not transforms:
+        raise ValueError("compose needs at least one transform")
+    Ts = [_float(T) for T in transforms]
+    dims = {_dim_of_transform(T, f"transform {i}") for i, T in enumerate(Ts)}
+    if len(dims) != 1:
+        raise ValueError(f"cannot compose 2D and 3D transforms: shapes {[T.shape for T in Ts]}")
+    out = Ts[0]
+    for T in Ts[1:]:
+        out = out @ T
+    return out
+
+
+def inverse(T) -> jax.Array:
+    """General inverse of a homogeneous (affine or projective) matrix.
+
+    The matrix counts as singular when its smallest singular value is below
+    ``size · eps · largest``; that raises ``ValueError`` (or a runtime error under jit).
+
+    Args:
+        T: ``(..., n+1, n+1)``.
+
+    Returns:
+        ``(..., n+1, n+1)``.
+    """
+    T = _float(T)
+    n1 = _dim_of_transform(T) + 1
+    sv = jax.lax.stop_gradient(jnp.linalg.svd(T, compute_uv=False))
+    tol = n1 * jnp.finfo(T.dtype).eps * sv[..., 0]
+    singular = ~(sv[..., -1] > tol)
+    T = _fail_if(
+        T,
+        singular,
+        "inverse: matrix is singular (or not finite)",
+        lambda: f"singular values {sv[singular] if singular.ndim else sv}",
+    )
+    return jnp.linalg.inv(T)
+
+
+def inverse_rigid(T) -> jax.Array:
+    """Closed-form inverse of a rigid transform: ``[[Rᵀ, -Rᵀ d], [0, 1]]`` (Exercise 17.6).
+
+    The linear block is assumed orthogonal and is not checked; use :func:`inverse` otherwise.
+
+    Args:
+        T: ``(..., n+1, n+1)`` with orthogonal ``A``.
+
+    Returns:
+        ``(..., n+1, n+1)``.
+    """
+    R, d = to_blocks(T)
+    Rt = jnp.swapaxes(R, -1, -2)
+    return from_blocks(Rt, -(Rt @ d[..., None])[..., 0])
+
+
+# --------------------------------------------------------------------------- application
+
+
+def to_homogeneous(x, w) -> jax.Array:
+    """Append the homogeneous coordinate: ``w = 1`` for points, ``w = 0`` for vectors.
+
+    Args:
+        x: ``(..., n)``.
+        w: scalar or ``(...)``.
+
+    Returns:
+        ``(..., n+1)``.
+    """
+    x = _float(x)
+    _dim_of_vector(x, "x")
+    w = jnp.broadcast_to(jnp.asarray(w, dtype=x.dtype), x.shape[:-1])
+    return jnp.concatenate([x, w[..., None]], axis=-1)
+
+
+def from_homogeneous(X) -> jax.Array:
+    """Homogenise ``(..., n+1) -> (..., n)`` by dividing by ``w`` (text before 17.4).
+
+    ``w = 0`` (a vector or a point at infinity) gives ``inf``/``nan``.
+    """
+    X = _float(X)
+    if X.ndim < 1 or X.shape[-1] not in (3, 4):
+        raise ValueError(f"X must have shape (..., 3) or (..., 4), got {X.shape}")
+    return X[..., :-1] / X[..., -1:]
+
+
+def apply(T, X) -> jax.Array:
+    """Apply ``T`` to homogeneous coordinates: ``X' = T @ X`` (17.4, 17.9).
+
+    Args:
+        T: ``(..., n+1, n+1)``.
+        X: ``(..., n+1)``; batches broadcast.
+
+    Returns:
+        ``(..., n+1)``.
+    """
+    T, X = _float(T), _float(X)
+    n = _dim_of_transform(T)
+    if X.ndim < 1 or X.shape[-1] != n + 1:
+        raise ValueError(f"X must have shape (..., {n + 1}) to match T {T.shape}, got {X.shape}")
+    return (T @ X[..., None])[..., 0]
+
+
+def _check_cartesian(T: jax.Array, x: jax.Array, name: str) -> int:
+    n = _dim_of_transform(T)
+    if x.ndim < 1 or x.shape[-1] != n:
+        raise ValueError(f"{name} must have shape (..., {n}) to match T {T.shape}, got {x.shape}")
+    return n
+
+
+def apply_to_points(T, p) -> jax.Array:
+    """Transform Cartesian points: append ``w = 1``, apply ``T``, homogenise (17.4, 17.9).
+
+    For an affine ``T`` the result has ``w = 1`` already; a projective ``T`` divides by ``w``.
+
+    Args:
+        T: ``(..., n+1, n+1)``.
+        p: ``(..., n)``; batches broadcast.
+
+    Returns:
+        ``(..., n)``.
+    """
+    T, p = _float(T), _float(p)
+    n = _check_cartesian(T, p, "p")
+    Y = (T @ to_homogeneous(p, 1.0)[..., None])[..., 0]
+    return Y[..., :n] / Y[..., n:]
+
+
+def apply_to_vectors(T, v) -> jax.Array:
+    """Transform Cartesian vectors (``w = 0``): only the linear block acts, ``v' = A v``.
+
+    Vectors such as displacements do not translate (text after 17.7).
+
+    Args:
+        T: ``(..., n+1, n+1)``.
+        v: ``(..., n)``; batches broadcast.
+
+    Returns:
+        ``(..., n)``.
+    """
+    T, v = _float(T), _float(v)
+    n = _check_cartesian(T, v, "v")
+    return (T[..., :n, :n] @ v[..., None])[..., 0]
+
+
+# --------------------------------------------------------------------------- projection
+
+
+def orthographic(points, axis: int = 2) -> tuple[jax.Array, jax.Array]:
+    """Orthographic parallel projection along a coordinate axis (section 17.2).
+
+    The viewer sits on the positive side of ``axis`` looking toward the origin. The
+    image coordinates are the other two coordinates in cyclic order, ``(u, v) = (y, z)``,
+    ``(z, x)`` or ``(x, y)`` for ``axis`` 0, 1, 2, so that ``u × v`` points to the viewer.
+
+    Args:
+        points: ``(..., 3)``.
+        axis: 0, 1 or 2 (static).
+
+    Returns:
+        ``(uv, depth)``: ``uv (..., 2)`` and ``depth = -points[..., axis]`` ``(...)``,
+        larger depth is farther away: draw in order of decreasing depth (back to front).
+    """
+    points = _float(points)
+    _check_vector3(points, "points")
+    if axis not in (0, 1, 2):
+        raise ValueError(f"axis must be 0, 1 or 2, got {axis!r}")
+    uv = jnp.stack([points[..., (axis + 1) % 3], points[..., (axis + 2) % 3]], axis=-1)
+    return uv, -points[..., axis]
+
+
+def _safe_norm(x: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """Norm of ``x (..., 3)`` and a flag for zero, with finite gradients at zero."""
+    sq = jnp.sum(x * x, axis=-1)
+    zero = sq == 0
+    return jnp.where(zero, 0.0, jnp.sqrt(jnp.where(zero, 1.0, sq))), zero
+
+
+def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> jax.Array:
+    """World → camera view matrix of a camera at ``eye`` looking at ``target``.
+
+    Camera frame: ``x`` to the right, ``y`` up, and the camera looks along ``-z``
+    (the OpenGL convention). The matrix is rigid: ``[[Rᵀ, -Rᵀ eye], [0, 1]]`` with the
+    columns of ``R`` the camera axes in world coordinates (17.9).
+
+    Args:
+        eye, target: ``(..., 3)``; must differ.
+        up: ``(..., 3)`` approximate up direction, not parallel to ``target - eye``.
+
+    Returns:
+        ``(..., 4, 4)``.
+    """
+    eye, target, up = _float(eye), _float(target), _float(up)
+    for name, x in (("eye", eye), ("target", target), ("up", up)):
+        _check_vector3(x, name)
+    eye, target, up = jnp.broadcast_arrays(eye, target, up)
+    forward = target - eye
+    dist, zero = _safe_norm(forward)
+    scale = jnp.maximum(jnp.max(jnp.abs(eye), axis=-1), jnp.max(jnp.abs(target), axis=-1))
+    tiny = jnp.finfo(forward.dtype).eps * jnp.maximum(scale, 1.0)
+    forward = _fail_if(
+        forward,
+        ~(dist > tiny),
+        "look_at: zero-length look direction (eye == target)",
+        lambda: f"eye {eye}, target {target}",
+    )
+    f = forward / jnp.where(zero, 1.0, dist)[..., None]
+    right = jnp.cross(f, up)
+    rnorm, rzero = _safe_norm(right)
+    unorm, _ = _safe_norm(up)
+    right = _fail_if(
+        right,
+        ~(rnorm > 1e3 * jnp.finfo(right.dtype).eps * unorm),
+        "look_at: `up` is zero or parallel to the look direction",
+        lambda: f"up {up}, look direction {f}",
+    )
+    r = right / jnp.where(rzero, 1.0, rnorm)[..., None]
+    u = jnp.cross(r, f)
+    rows = jnp.stack([r, u, -f], axis=-2)  # = Rᵀ
+    return from_blocks(rows, -(rows @ eye[..., None])[..., 0])
+
+
+def perspective(
+    points, eye, target, fov, *, up=(0.0, 0.0, 1.0), aspect=1.0
+) -> tuple[jax.Array, jax.Array]:
+    """Pinhole camera: project world points to normalised image coordinates and depth.
+
+    With camera coordinates ``(x, y, z)`` from :func:`look_at` and ``depth = -z``
+    (distance in front of the eye along the view axis), ``f = 1 / tan(fov / 2)``:
+    ``u = f x / (aspect · depth)``, ``v = f y / depth``. The target maps to ``(0, 0)``,
+    the image edges to ``±1``. Points at or behind the eye (``depth ≤ 0``) get ``nan``
+    image coordinates; cull them with ``depth > 0``. Draw faces in order of decreasing
+    depth (back to front).
+
+    Args:
+        points: ``(..., 3)`` world coordinates.
+        eye, target: ``(..., 3)``.
+        fov: vertical field of view in radians, in ``(0, π)``; ``(...)``.
+        up: ``(..., 3)`` approximate up direction.
+        aspect: image width / height, ``(...)``. ``fov`` and ``aspect`` broadcast
+            against the batch shape of the points (numpy rules).
+
+    Returns:
+        ``(uv, depth)``: ``uv (..., 2)`` and ``depth (...)``; batches broadcast.
+    """
+    points = _float(points)
+    _check_vector3(points, "points")
+    fov, aspect = _float(fov), _float(aspect)
+    fov = _fail_if(
+        fov,
+        ~((fov > 0) & (fov < jnp.pi)),
+        "perspective: fov must be in (0, π) radians",
+        lambda: f"fov {fov}",
+    )
+    V = look_at(eye, target, up)
+    pc = apply_to_points(V, points)
+    depth = -pc[..., 2]
+    batch = jnp.broadcast_shapes(depth.shape, fov.shape, aspect.shape)
+    depth, fov, aspect = (jnp.broadcast_to(x, batch) for x in (depth, fov, aspect))
+    pc = jnp.broadcast_to(pc, batch + (3,))
+    in_front = depth > 0
+    f = 1.0 / jnp.tan(0.5 * fov)
+    scale = f / jnp.where(in_front, depth, 1.0)
+    uv = jnp.stack([pc[..., 0] * scale / aspect, pc[..., 1] * scale], axis=-1)
+    uv = jnp.where(in_front[..., None], uv, jnp.nan)
+    return uv, depth

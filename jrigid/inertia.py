@@ -1,0 +1,452 @@
+"""Inertia: moments of simple shapes, tensors of point masses, principal axes, checks.
+
+Implements chapter 17.29–17.32 and Table 17.1.
+
+An inertia is given either as principal moments ``(..., 3)`` about the body ``x, y, z``
+axes, or as a symmetric tensor ``(..., 3, 3)``. The shape functions return principal
+moments about the centre of mass for a uniform density; each docstring states how the
+shape sits along the body axes. Arguments broadcast over leading batch dimensions.
+
+Errors: :func:`validate` raises ``ValueError`` naming the violated condition and the
+offending values (it needs concrete values; under a JAX transformation it falls back to
+:func:`check`). :func:`check` is jit-safe: it raises at run time through
+``equinox.error_if``. Wrong shapes raise ``ValueError`` while tracing.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from jrigid import quaternion as quat
+
+__all__ = [
+    "box",
+    "check",
+    "disk",
+    "ellipsoid",
+    "from_point_masses",
+    "parallel_axis",
+    "principal_axes",
+    "rotate_tensor",
+    "rotate_tensor_by_matrix",
+    "solid_cylinder",
+    "sphere",
+    "thin_disk",
+    "thin_plate",
+    "thin_rod",
+    "to_tensor",
+    "validate",
+]
+
+
+def _float(x) -> jax.Array:
+    x = jnp.asarray(x)
+    if not jnp.issubdtype(x.dtype, jnp.floating):
+        x = x.astype(jnp.result_type(float))
+    return x
+
+
+def _moments(*columns) -> jax.Array:
+    """Stack three broadcast-compatible ``(...)`` arrays into ``(..., 3)``."""
+    return jnp.stack(jnp.broadcast_arrays(*[_float(c) for c in columns]), axis=-1)
+
+
+def _eye(like: jax.Array) -> jax.Array:
+    """Identity ``(..., 3, 3)`` with the batch shape and dtype of ``like (..., 3)``."""
+    return jnp.broadcast_to(jnp.eye(3, dtype=like.dtype), like.shape[:-1] + (3, 3))
+
+
+def _check_tensor(inertia: jax.Array, name: str = "inertia") -> None:
+    if inertia.ndim < 2 or inertia.shape[-2:] != (3, 3):
+        hint = (
+            " (use to_tensor for principal moments)"
+            if inertia.ndim >= 1 and inertia.shape[-1] == 3
+            else ""
+        )
+        raise ValueError(f"{name} must be a tensor of shape (..., 3, 3), got {inertia.shape}{hint}")
+
+
+# --------------------------------------------------------------------------- Table 17.1
+
+
+def ellipsoid(m, a, b, c) -> jax.Array:
+    """Solid ellipsoid with semi-axes ``a, b, c`` along body ``x, y, z`` (Table 17.1).
+
+    Args:
+        m: mass ``(...)``.
+        a, b, c: semi-axes ``(...)`` (the table's "axes (2a, 2b, 2c)").
+
+    Returns:
+        ``(..., 3)``: ``m (b²+c², a²+c², a²+b²) / 5``.
+    """
+    m, a, b, c = jnp.broadcast_arrays(*[_float(x) for x in (m, a, b, c)])
+    a2, b2, c2 = a * a, b * b, c * c
+    return _moments(m * (b2 + c2) / 5, m * (a2 + c2) / 5, m * (a2 + b2) / 5)
+
+
+def box(m, a, b, c) -> jax.Array:
+    """Solid rectangular box (the table's parallelepiped), sides ``a, b, c`` along ``x, y, z``.
+
+    Args:
+        m: mass ``(...)``.
+        a, b, c: full side lengths ``(...)``.
+
+    Returns:
+        ``(..., 3)``: ``m (b²+c², a²+c², a²+b²) / 12`` (Table 17.1).
+    """
+    m, a, b, c = jnp.broadcast_arrays(*[_float(x) for x in (m, a, b, c)])
+    a2, b2, c2 = a * a, b * b, c * c
+    return _moments(m * (b2 + c2) / 12, m * (a2 + c2) / 12, m * (a2 + b2) / 12)
+
+
+def sphere(m, r) -> jax.Array:
+    """Solid sphere of radius ``r``: ``(2/5) m r²`` about every diameter (Table 17.1).
+
+    Args:
+        m: mass ``(...)``.
+        r: radius ``(...)``.
+
+    Returns:
+        ``(..., 3)``.
+    """
+    m, r = jnp.broadcast_arrays(_float(m), _float(r))
+    i = 0.4 * m * r * r
+    return _moments(i, i, i)
+
+
+def thin_rod(m, length) -> jax.Array:
+    """Thin rod of length ``length`` along body ``z`` (Table 17.1).
+
+    Args:
+        m: mass ``(...)``.
+        length: ``(...)``.
+
+    Returns:
+        ``(..., 3)``: ``(m l²/12, m l²/12, 0)``. The zero moment makes the rod a
+        degenerate body: :func:`validate` rejects it as not positive definite.
+    """
+    m, length = jnp.broadcast_arrays(_float(m), _float(length))
+    i = m * length * length / 12
+    return _moments(i, i, jnp.zeros_like(i))
+
+
+def thin_disk(m, r) -> jax.Array:
+    """Thin circular sheet of radius ``r`` with its normal along body ``z`` (Table 17.1).
+
+    Args:
+        m: mass ``(...)``.
+        r: radius ``(...)``.
+
+    Returns:
+        ``(..., 3)``: ``(m r²/4, m r²/4, m r²/2)``.
+    """
+    m, r = jnp.broadcast_arrays(_float(m), _float(r))
+    i = m * r * r / 4
+    return _moments(i, i, 2 * i)
+
+
+def thin_plate(m, a, b) -> jax.Array:
+    """Thin rectangular sheet, side ``a`` along body ``x``, ``b`` along ``y``, normal ``z``.
+
+    Table 17.1 prints the normal moment as ``m(a²+b²)/2``; the integral 17.31c gives
+    ``m(a²+b²)/12`` (the perpendicular-axis theorem ``I3 = I1 + I2`` agrees).
+
+    Args:
+        m: mass ``(...)``.
+        a, b: side lengths ``(...)``.
+
+    Returns:
+        ``(..., 3)``: ``(m b²/12, m a²/12, m (a²+b²)/12)``.
+    """
+    m, a, b = jnp.broadcast_arrays(_float(m), _float(a), _float(b))
+    ix, iy = m * b * b / 12, m * a * a / 12
+    return _moments(ix, iy, ix + iy)
+
+
+def solid_cylinder(m, r, h) -> jax.Array:
+    """Solid circular cylinder of radius ``r`` and height ``h``, axis along body ``z``.
+
+    Args:
+        m: mass ``(...)``.
+        r: radius ``(...)``.
+        h: height ``(...)``.
+
+    Returns:
+        ``(..., 3)``: ``(m(3r²+h²)/12, m(3r²+h²)/12, m r²/2)`` (17.31 integrated).
+    """
+    m, r, h = jnp.broadcast_arrays(_float(m), _float(r), _float(h))
+    i = m * (3 * r * r + h * h) / 12
+    return _moments(i, i, m * r * r / 2)
+
+
+def disk(m, r, thickness) -> jax.Array:
+    """Disk of finite ``thickness`` with its normal along body ``z``; a short cylinder.
+
+    Args:
+        m: mass ``(...)``.
+        r: radius ``(...)``.
+        thickness: ``(...)``.
+
+    Returns:
+        ``(..., 3)``, equal to ``solid_cylinder(m, r, thickness)``; tends to
+        :func:`thin_disk` as ``thickness → 0``.
+    """
+    return solid_cylinder(m, r, thickness)
+
+
+# --------------------------------------------------------------------------- tensors
+
+
+def to_tensor(moments) -> jax.Array:
+    """Diagonal tensor ``diag(I1, I2, I3)`` from principal moments.
+
+    Args:
+        moments: ``(..., 3)``.
+
+    Returns:
+        ``(..., 3, 3)``.
+    """
+    moments = _float(moments)
+    if moments.ndim < 1 or moments.shape[-1] != 3:
+        raise ValueError(f"moments must have shape (..., 3), got {moments.shape}")
+    return moments[..., :, None] * _eye(moments)
+
+
+def from_point_masses(masses, positions, origin=None) -> jax.Array:
+    """Inertia tensor of point masses about ``origin`` (the sums behind 17.31).
+
+    ``I = Σ_k m_k (|r_k|² 1 − r_k r_kᵀ)`` with ``r_k = position_k − origin``; its diagonal
+    is 17.31a–c with the integrals replaced by sums, the off-diagonal entries are the
+    products of inertia.
+
+    Args:
+        masses: ``(..., N)``.
+        positions: ``(..., N, 3)``.
+        origin: ``(..., 3)``; default the centre of mass.
+
+    Returns:
+        ``(..., 3, 3)``.
+    """
+    masses, positions = _float(masses), _float(positions)
+    if positions.ndim < 2 or positions.shape[-1] != 3:
+        raise ValueError(f"positions must have shape (..., N, 3), got {positions.shape}")
+    if masses.ndim < 1 or masses.shape[-1] != positions.shape[-2]:
+        raise ValueError(
+            f"masses must have shape (..., N) with N = {positions.shape[-2]} "
+            f"to match positions {positions.shape}, got {masses.shape}"
+        )
+    n = positions.shape[-2]
+    batch = jnp.broadcast_shapes(masses.shape[:-1], positions.shape[:-2])
+    masses = jnp.broadcast_to(masses, batch + (n,))
+    positions = jnp.broadcast_to(positions, batch + (n, 3))
+    if origin is None:
+        origin = jnp.einsum("...n,...ni->...i", masses, positions) / jnp.sum(
+            masses, axis=-1, keepdims=True
+        )
+    else:
+        origin = _float(origin)
+        if origin.ndim < 1 or origin.shape[-1] != 3:
+            raise ValueError(f"origin must have shape (..., 3), got {origin.shape}")
+        batch = jnp.broadcast_shapes(batch, origin.shape[:-1])
+        masses = jnp.broadcast_to(masses, batch + (n,))
+        positions = jnp.broadcast_to(positions, batch + (n, 3))
+        origin = jnp.broadcast_to(origin, batch + (3,))
+    r = positions - origin[..., None, :]
+    second = jnp.einsum("...n,...ni,...nj->...ij", masses, r, r)
+    trace = jnp.trace(second, axis1=-2, axis2=-1)
+    return trace[..., None, None] * _eye(second[..., 0]) - second
+
+
+def parallel_axis(I_cm, mass, d) -> jax.Array:
+    """Shift a centre-of-mass tensor to a point displaced by ``d`` (parallel-axis theorem).
+
+    ``I_O = I_cm + M (|d|² 1 − d dᵀ)``; the sign of ``d`` does not matter.
+
+    Args:
+        I_cm: ``(..., 3, 3)`` about the centre of mass.
+        mass: total mass ``(...)``.
+        d: displacement between the centre of mass and the new origin ``(..., 3)``.
+
+    Returns:
+        ``(..., 3, 3)``.
+    """
+    I_cm, mass, d = _float(I_cm), _float(mass), _float(d)
+    _check_tensor(I_cm, "I_cm")
+    if d.ndim < 1 or d.shape[-1] != 3:
+        raise ValueError(f"d must have shape (..., 3), got {d.shape}")
+    batch = jnp.broadcast_shapes(I_cm.shape[:-2], mass.shape, d.shape[:-1])
+    I_cm = jnp.broadcast_to(I_cm, batch + (3, 3))
+    mass = jnp.broadcast_to(mass, batch)
+    d = jnp.broadcast_to(d, batch + (3,))
+    dd = d[..., :, None] * d[..., None, :]
+    shift = jnp.sum(d * d, axis=-1)[..., None, None] * _eye(d) - dd
+    return I_cm + mass[..., None, None] * shift
+
+
+def rotate_tensor_by_matrix(inertia, R) -> jax.Array:
+    """Frame change ``R I Rᵀ`` (17.32, where the chapter writes ``M I M⁻¹``).
+
+    With ``R`` the active body → space matrix (``v_space = R v_body``), this turns a
+    body-frame tensor into the space-frame one.
+
+    Args:
+        inertia: ``(..., 3, 3)``.
+        R: ``(..., 3, 3)`` rotation matrix.
+
+    Returns:
+        ``(..., 3, 3)``.
+    """
+    inertia, R = _float(inertia), _float(R)
+    _check_tensor(inertia)
+    _check_tensor(R, "R")
+    return R @ inertia @ jnp.swapaxes(R, -1, -2)
+
+
+def rotate_tensor(inertia, q) -> jax.Array:
+    """Body → space frame change of an inertia tensor, ``R I Rᵀ`` with ``R`` from ``q`` (17.32).
+
+    Args:
+        inertia: ``(..., 3, 3)`` in the body frame (use :func:`to_tensor` for moments).
+        q: ``(..., 4)`` unit quaternion, body → space.
+
+    Returns:
+        ``(..., 3, 3)`` in the space frame. ``rotate_tensor(I, quat.conjugate(q))`` goes back.
+    """
+    q = _float(q)
+    if q.ndim < 1 or q.shape[-1] != 4:
+        raise ValueError(f"q must have shape (..., 4), got {q.shape}")
+    return rotate_tensor_by_matrix(inertia, quat.to_matrix(q))
+
+
+def principal_axes(inertia) -> tuple[jax.Array, jax.Array]:
+    """Principal moments and a right-handed principal frame of a symmetric tensor.
+
+    ``I = R diag(moments) Rᵀ`` with ``R = quaternion.to_matrix(q)``: the columns of ``R``
+    are the principal axes in the frame of ``I``, and ``q`` is the body → frame rotation.
+
+    For repeated moments any orthonormal basis of the eigenspace is equally valid and
+    one is returned; the moments and their gradients stay well defined there, the frame's
+    gradient is defined only where the moments are distinct.
+
+    Args:
+        inertia: ``(..., 3, 3)`` symmetric (the symmetric part is used).
+
+    Returns:
+        ``(moments, q)``: ``moments (..., 3)`` in ascending order, ``q (..., 4)``.
+    """
+    inertia = _float(inertia)
+    _check_tensor(inertia)
+    sym = 0.5 * (inertia + jnp.swapaxes(inertia, -1, -2))
+    moments, V = jnp.linalg.eigh(sym)
+    sign = jnp.sign(jnp.linalg.det(V))
+    sign = jnp.where(sign == 0, 1.0, sign).astype(V.dtype)
+    V = jnp.concatenate([V[..., :2], V[..., 2:] * sign[..., None, None]], axis=-1)
+    return moments, quat.from_matrix(V)
+
+
+# --------------------------------------------------------------------------- checks
+
+
+def _kind(inertia: jax.Array, kind: str | None) -> str:
+    if kind is None:
+        kind = "tensor" if inertia.ndim >= 2 and inertia.shape[-2:] == (3, 3) else "moments"
+    if kind == "tensor":
+        _check_tensor(inertia)
+    elif kind == "moments":
+        if inertia.ndim < 1 or inertia.shape[-1] != 3:
+            raise ValueError(f"moments must have shape (..., 3), got {inertia.shape}")
+    else:
+        raise ValueError(f"kind must be None, 'moments' or 'tensor', got {kind!r}")
+    return kind
+
+
+def _conditions(inertia: jax.Array, kind: str, allow_nonphysical: bool, rtol):
+    """``[(name, bad (...), label, values), ...]`` in the order they are reported."""
+    eps = jnp.finfo(inertia.dtype).eps
+    rtol = jnp.sqrt(eps) if rtol is None else rtol
+    core = (-2, -1) if kind == "tensor" else (-1,)
+    finite = jnp.all(jnp.isfinite(inertia), axis=core)
+    clean = jnp.where(jnp.isfinite(inertia), inertia, 0.0)
+    out = [("values not finite", ~finite, "values", inertia)]
+    if kind == "tensor":
+        scale = jnp.max(jnp.abs(clean), axis=core)
+        asym = jnp.max(jnp.abs(clean - jnp.swapaxes(clean, -1, -2)), axis=core)
+        out.append(("tensor not symmetric", finite & ~(asym <= rtol * scale), "tensor", inertia))
+        moments = jnp.linalg.eigvalsh(0.5 * (clean + jnp.swapaxes(clean, -1, -2)))
+    else:
+        moments = jnp.sort(clean, axis=-1)
+    lo, mid, hi = moments[..., 0], moments[..., 1], moments[..., 2]
+    pd = lo > 3 * eps * jnp.abs(hi)
+    out.append(("not positive definite", finite & ~pd, "principal moments", moments))
+    if not allow_nonphysical:
+        tri = lo + mid >= hi * (1 - rtol)
+        out.append(
+            (
+                "triangle inequality Ia + Ib >= Ic violated",
+                finite & pd & ~tri,
+                "principal moments",
+                moments,
+            )
+        )
+    return out
+
+
+def check(inertia, *, allow_nonphysical: bool = False, kind: str | None = None, rtol=None):
+    """Jit-safe version of :func:`validate`: returns ``inertia``, errors at run time.
+
+    Uses ``equinox.error_if``; under ``jax.jit`` a violated condition raises a runtime
+    error whose message names the condition (values are not available there).
+
+    Args:
+        inertia: moments ``(..., 3)`` or tensor ``(..., 3, 3)``.
+        allow_nonphysical: skip the triangle inequality.
+        kind: ``"moments"``, ``"tensor"`` or ``None`` (a trailing ``(3, 3)`` means tensor).
+        rtol: relative tolerance of the symmetry and triangle tests; default ``sqrt(eps)``.
+
+    Returns:
+        ``inertia`` unchanged (as a float array).
+    """
+    inertia = _float(inertia)
+    kind = _kind(inertia, kind)
+    for name, bad, _, _ in _conditions(inertia, kind, allow_nonphysical, rtol):
+        inertia = eqx.error_if(inertia, bad, f"inertia is not valid: {name}")
+    return inertia
+
+
+def validate(inertia, *, allow_nonphysical: bool = False, kind: str | None = None, rtol=None):
+    """Check that ``inertia`` is a physical inertia; raise ``ValueError`` otherwise.
+
+    Conditions, in order: finite; symmetric (tensor only, ``|I − Iᵀ| ≤ rtol·max|I|``);
+    positive definite (smallest principal moment ``> 3 eps ×`` the largest); triangle
+    inequality ``Ia + Ib ≥ Ic (1 − rtol)`` of the principal moments, which every real
+    mass distribution satisfies (skipped with ``allow_nonphysical=True``, e.g. for the
+    Hairer–Lubich–Wanner test body ``(2, 1, 2/3)``). Flat bodies meet it with equality.
+
+    The message names the first violated condition, the first offending batch index and
+    its values. Under a JAX transformation (jit, vmap, grad) this defers to :func:`check`.
+
+    Args:
+        inertia: moments ``(..., 3)`` or tensor ``(..., 3, 3)``.
+        allow_nonphysical: skip the triangle inequality.
+        kind: ``"moments"``, ``"tensor"`` or ``None`` (a trailing ``(3, 3)`` means tensor;
+            pass ``"moments"`` for a batch of three moment vectors).
+        rtol: relative tolerance of the symmetry and triangle tests; default ``sqrt(eps)``.
+
+    Returns:
+        ``inertia`` unchanged (as a float array).
+    """
+    inertia = _float(inertia)
+    kind = _kind(inertia, kind)
+    if isinstance(inertia, jax.core.Tracer):
+        return check(inertia, allow_nonphysical=allow_nonphysical, kind=kind, rtol=rtol)
+    for name, bad, label, values in _conditions(inertia, kind, allow_nonphysical, rtol):
+        if bool(jnp.any(bad)):
+            where = ""
+            if bad.ndim:
+                idx = tuple(int(i) for i in jnp.argwhere(bad)[0])
+                values = values[idx]
+                where = f" at batch index {idx}"
+            raise ValueError(f"inertia is not valid: {name}{where}; {label} {values}")
+    return inertia
