@@ -1,0 +1,485 @@
+"""Quaternion algebra, axis-angle, rotation vectors, slerp and kinematics.
+
+Conventions (see the package docstring): quaternions are ``(..., 4)`` arrays, scalar
+first ``(w, x, y, z)`` = the chapter's ``(q0, q1, q2, q3)``; a unit quaternion ``q``
+maps body to space, ``v_space = q ⊗ (0, v_body) ⊗ q*`` (eq. 17.26); angular velocity
+is body frame unless a name says ``space``; ``q̇ = ½ q ⊗ (0, ω_body)`` (eq. 17.44).
+
+Every function broadcasts over leading batch dimensions (explicitly, so it also works
+with ``jax_numpy_rank_promotion="raise"``), and has finite gradients at the identity
+and at 180° rotations (Taylor branches plus the double-``where`` trick).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import jax
+import jax.numpy as jnp
+from jax.typing import ArrayLike
+
+from ._utils import (
+    as_float,
+    as_float_pair,
+    broadcast_batch,
+    cross,
+    dot,
+    epsilon,
+    safe_norm,
+)
+
+__all__ = [
+    "angular_velocity",
+    "angular_velocity_space",
+    "canonicalize",
+    "conjugate",
+    "derivative",
+    "derivative_space",
+    "distance",
+    "from_axis_angle",
+    "from_rotvec",
+    "from_xyzw",
+    "identity",
+    "inverse",
+    "multiply",
+    "norm",
+    "normalize",
+    "rotate",
+    "rotate_inverse",
+    "slerp",
+    "to_axis_angle",
+    "to_rotvec",
+    "to_xyzw",
+    "w_matrix",
+    "w_matrix_space",
+]
+
+
+# ---------------------------------------------------------------------------
+# Algebra (17.19-17.24)
+# ---------------------------------------------------------------------------
+
+
+def identity(batch_shape: Sequence[int] = (), dtype=None) -> jax.Array:
+    """The identity rotation ``(1, 0, 0, 0)``.
+
+    Args:
+        batch_shape: leading shape of the result.
+        dtype: floating dtype; ``None`` means JAX's default float (float64 when x64 is on).
+
+    Returns:
+        ``(*batch_shape, 4)`` array.
+    """
+    shape = tuple(batch_shape) + (4,)
+    return jnp.zeros(shape, dtype=dtype).at[..., 0].set(1)
+
+
+def multiply(p: ArrayLike, q: ArrayLike) -> jax.Array:
+    """Hamilton product ``p ⊗ q`` (eq. 17.24).
+
+    ``(p0, p)(q0, q) = (p0 q0 - p·q, p0 q + q0 p + p × q)``. The composition
+    ``multiply(p, q)`` rotates first by ``q``, then by ``p``.
+
+    Args:
+        p: ``(..., 4)`` quaternion.
+        q: ``(..., 4)`` quaternion; batch dimensions broadcast with ``p``'s.
+
+    Returns:
+        ``(..., 4)`` product.
+    """
+    p, q = as_float_pair(p, q)
+    p, q = broadcast_batch(p, 1, q, 1)
+    p0, pv = p[..., 0], p[..., 1:]
+    q0, qv = q[..., 0], q[..., 1:]
+    w = p0 * q0 - dot(pv, qv)
+    v = p0[..., None] * qv + q0[..., None] * pv + cross(pv, qv)
+    return jnp.concatenate([w[..., None], v], axis=-1)
+
+
+def conjugate(q: ArrayLike) -> jax.Array:
+    """Quaternion conjugate ``(q0, -q1, -q2, -q3)`` (eq. 17.21).
+
+    Args:
+        q: ``(..., 4)``.
+
+    Returns:
+        ``(..., 4)``.
+    """
+    q = as_float(q)
+    return jnp.concatenate([q[..., :1], -q[..., 1:]], axis=-1)
+
+
+def norm(q: ArrayLike) -> jax.Array:
+    """Quaternion norm ``sqrt(q q*)``; the gradient at ``q = 0`` is defined as zero.
+
+    Args:
+        q: ``(..., 4)``.
+
+    Returns:
+        ``(...)`` norms.
+    """
+    return safe_norm(as_float(q))
+
+
+def normalize(q: ArrayLike) -> jax.Array:
+    """Scale ``q`` to unit norm.
+
+    A zero quaternion has no direction: the result is NaN (no error is raised, so
+    that the function stays traceable). Use :func:`check_quaternion` to reject
+    such input with a clear error.
+
+    Args:
+        q: ``(..., 4)``.
+
+    Returns:
+        ``(..., 4)`` unit quaternion.
+    """
+    q = as_float(q)
+    return q / jnp.sqrt(jnp.sum(q * q, axis=-1, keepdims=True))
+
+
+def inverse(q: ArrayLike) -> jax.Array:
+    """Multiplicative inverse ``q* / |q|²`` (equals the conjugate for unit ``q``).
+
+    A zero quaternion gives NaN (see :func:`check_quaternion`).
+
+    Args:
+        q: ``(..., 4)``.
+
+    Returns:
+        ``(..., 4)``.
+    """
+    q = as_float(q)
+    return conjugate(q) / jnp.sum(q * q, axis=-1, keepdims=True)
+
+
+def canonicalize(q: ArrayLike) -> jax.Array:
+    """Representative of ``±q`` with non-negative scalar part.
+
+    Args:
+        q: ``(..., 4)``.
+
+    Returns:
+        ``(..., 4)``, ``q`` or ``-q``, whichever has ``w >= 0``.
+    """
+    q = as_float(q)
+    return jnp.where(q[..., :1] < 0, -q, q)
+
+
+# ---------------------------------------------------------------------------
+# Rotating vectors (17.26)
+# ---------------------------------------------------------------------------
+
+
+def rotate(q: ArrayLike, v: ArrayLike) -> jax.Array:
+    """Active rotation ``q ⊗ (0, v) ⊗ q*`` (eq. 17.26): body → space.
+
+    Evaluated as ``(w² - |u|²) v + 2 (u·v) u + 2 w (u × v)`` with ``q = (w, u)``,
+    which is (17.26) exactly; for a non-unit ``q`` the result is scaled by ``|q|²``.
+
+    Args:
+        q: ``(..., 4)`` unit quaternion.
+        v: ``(..., 3)`` vector; batch dimensions broadcast with ``q``'s.
+
+    Returns:
+        ``(..., 3)`` rotated vector.
+    """
+    q, v = as_float_pair(q, v)
+    q, v = broadcast_batch(q, 1, v, 1)
+    w, u = q[..., :1], q[..., 1:]
+    return (
+        (w * w - jnp.sum(u * u, axis=-1, keepdims=True)) * v
+        + 2.0 * jnp.sum(u * v, axis=-1, keepdims=True) * u
+        + 2.0 * w * cross(u, v)
+    )
+
+
+def rotate_inverse(q: ArrayLike, v: ArrayLike) -> jax.Array:
+    """Inverse rotation ``q* ⊗ (0, v) ⊗ q``: space → body.
+
+    Args:
+        q: ``(..., 4)`` unit quaternion.
+        v: ``(..., 3)`` vector in the space frame.
+
+    Returns:
+        ``(..., 3)`` the same vector in body coordinates.
+    """
+    return rotate(conjugate(q), v)
+
+
+# ---------------------------------------------------------------------------
+# Axis-angle (17.25, 17.27) and rotation vectors (exp / log)
+# ---------------------------------------------------------------------------
+
+
+def from_axis_angle(axis: ArrayLike, angle: ArrayLike) -> jax.Array:
+    """Quaternion ``(cos θ/2, u sin θ/2)`` of a rotation by ``angle`` about ``axis`` (eq. 17.25).
+
+    Args:
+        axis: ``(..., 3)`` rotation axis; it is normalised here. A zero axis gives NaN
+            in the vector part.
+        angle: ``(...)`` angle in radians (right-hand rule); broadcasts with ``axis``.
+
+    Returns:
+        ``(..., 4)`` unit quaternion.
+    """
+    axis, angle = as_float_pair(axis, angle)
+    axis, angle = broadcast_batch(axis, 1, angle, 0)
+    u = axis / jnp.sqrt(jnp.sum(axis * axis, axis=-1, keepdims=True))
+    half = 0.5 * angle
+    return jnp.concatenate([jnp.cos(half)[..., None], jnp.sin(half)[..., None] * u], axis=-1)
+
+
+def to_axis_angle(q: ArrayLike) -> tuple[jax.Array, jax.Array]:
+    """Axis and angle of a rotation (eq. 17.27, in a numerically stable form).
+
+    The chapter's ``θ = 2 arccos q0`` loses accuracy near 0 and π and has an infinite
+    derivative at ``q0 = ±1``; here ``θ = 2 atan2(|q|, |q0|)``, which is accurate
+    everywhere and returns ``θ ∈ [0, π]`` (``q`` is first replaced by ``-q`` if
+    ``q0 < 0``). For the identity the axis is undefined; ``(1, 0, 0)`` is returned
+    and the gradient there is finite. ``q`` need not be exactly unit.
+
+    Args:
+        q: ``(..., 4)``.
+
+    Returns:
+        ``(axis, angle)``: ``(..., 3)`` unit axis and ``(...)`` angle in ``[0, π]``.
+    """
+    q = canonicalize(q)
+    w, v = q[..., 0], q[..., 1:]
+    n2 = jnp.sum(v * v, axis=-1)
+    nonzero = n2 > 0
+    n = jnp.sqrt(jnp.where(nonzero, n2, jnp.ones_like(n2)))
+    default = jnp.zeros_like(v).at[..., 0].set(1)
+    axis = jnp.where(nonzero[..., None], v / n[..., None], default)
+    angle = 2.0 * jnp.arctan2(jnp.where(nonzero, n, jnp.zeros_like(n)), w)
+    return axis, angle
+
+
+def from_rotvec(rotvec: ArrayLike) -> jax.Array:
+    """Exponential map: rotation vector ``θ u`` → unit quaternion.
+
+    Uses a Taylor expansion for ``θ² < ε`` so values and gradients are exact and
+    finite at the identity.
+
+    Args:
+        rotvec: ``(..., 3)`` rotation vector (axis times angle in radians).
+
+    Returns:
+        ``(..., 4)`` unit quaternion.
+    """
+    r = as_float(rotvec)
+    theta2 = jnp.sum(r * r, axis=-1)
+    small = theta2 < epsilon(r.dtype)
+    theta = jnp.sqrt(jnp.where(small, jnp.ones_like(theta2), theta2))
+    theta4 = theta2 * theta2
+    w = jnp.where(small, 1.0 - theta2 / 8.0 + theta4 / 384.0, jnp.cos(0.5 * theta))
+    k = jnp.where(small, 0.5 - theta2 / 48.0 + theta4 / 3840.0, jnp.sin(0.5 * theta) / theta)
+    return jnp.concatenate([w[..., None], k[..., None] * r], axis=-1)
+
+
+def to_rotvec(q: ArrayLike) -> jax.Array:
+    """Logarithm map: unit quaternion → rotation vector ``θ u`` with ``θ ∈ [0, π]``.
+
+    ``q`` and ``-q`` give the same result (the shorter rotation). Uses a Taylor
+    expansion near the identity so the gradient is finite there; finite at 180° too.
+
+    Args:
+        q: ``(..., 4)``; need not be exactly unit (the result is scale-invariant).
+
+    Returns:
+        ``(..., 3)`` rotation vector.
+    """
+    q = canonicalize(q)
+    w, v = q[..., 0], q[..., 1:]
+    n2 = jnp.sum(v * v, axis=-1)
+    small = n2 < epsilon(q.dtype) * w * w
+    n = jnp.sqrt(jnp.where(small, jnp.ones_like(n2), n2))
+    w_safe = jnp.where(small, w, jnp.ones_like(w))
+    k = jnp.where(
+        small,
+        2.0 / w_safe - 2.0 * n2 / (3.0 * w_safe**3),
+        2.0 * jnp.arctan2(n, w) / n,
+    )
+    return k[..., None] * v
+
+
+def distance(p: ArrayLike, q: ArrayLike) -> jax.Array:
+    """Angle in ``[0, π]`` of the rotation taking ``q`` to ``p`` (sign-invariant).
+
+    Args:
+        p: ``(..., 4)`` unit quaternion.
+        q: ``(..., 4)`` unit quaternion; batch dimensions broadcast.
+
+    Returns:
+        ``(...)`` geodesic distance in radians.
+    """
+    return to_axis_angle(multiply(conjugate(q), p))[1]
+
+
+def slerp(p: ArrayLike, q: ArrayLike, t: ArrayLike) -> jax.Array:
+    """Spherical linear interpolation from ``p`` (``t=0``) to ``±q`` (``t=1``), shorter arc.
+
+    Computed as ``p ⊗ exp(t log(p* ⊗ q))``, which takes the shorter arc because the
+    log map returns angles in ``[0, π]``, and is exact and differentiable for
+    ``p = ±q``.
+
+    Args:
+        p: ``(..., 4)`` unit quaternion.
+        q: ``(..., 4)`` unit quaternion.
+        t: ``(...)`` interpolation parameter; all batch dimensions broadcast.
+
+    Returns:
+        ``(..., 4)`` unit quaternion.
+    """
+    p, q = as_float_pair(p, q)
+    rel = to_rotvec(multiply(conjugate(p), q))
+    rel, t = as_float_pair(rel, t)
+    rel, t = broadcast_batch(rel, 1, t, 0)
+    return multiply(p, from_rotvec(t[..., None] * rel))
+
+
+# ---------------------------------------------------------------------------
+# scipy interoperability
+# ---------------------------------------------------------------------------
+
+
+def from_xyzw(q_xyzw: ArrayLike) -> jax.Array:
+    """Scalar-last ``(x, y, z, w)`` (scipy's default) → scalar-first ``(w, x, y, z)``.
+
+    Args:
+        q_xyzw: ``(..., 4)``.
+
+    Returns:
+        ``(..., 4)``.
+    """
+    q = as_float(q_xyzw)
+    return jnp.concatenate([q[..., 3:], q[..., :3]], axis=-1)
+
+
+def to_xyzw(q: ArrayLike) -> jax.Array:
+    """Scalar-first ``(w, x, y, z)`` → scalar-last ``(x, y, z, w)`` (scipy's default).
+
+    Args:
+        q: ``(..., 4)``.
+
+    Returns:
+        ``(..., 4)``.
+    """
+    q = as_float(q)
+    return jnp.concatenate([q[..., 1:], q[..., :1]], axis=-1)
+
+
+# ---------------------------------------------------------------------------
+# Kinematics (17.37-17.44)
+# ---------------------------------------------------------------------------
+
+
+def w_matrix(q: ArrayLike) -> jax.Array:
+    """The chapter's matrix ``W`` (eq. 17.43, first three rows), body frame.
+
+    ``ω_body = 2 W q̇`` (eq. 17.42) and, for unit ``q``, ``q̇ = ½ Wᵀ ω_body`` (eq. 17.44)
+    because the rows of ``W`` are orthonormal. ``2 W q̇`` is the vector part of
+    ``2 q* ⊗ q̇``. The chapter's fourth row ``(q0, q1, q2, q3)`` gives ``q·q̇ = 0``.
+
+    Args:
+        q: ``(..., 4)`` unit quaternion.
+
+    Returns:
+        ``(..., 3, 4)``::
+
+            [[-q1,  q0,  q3, -q2],
+             [-q2, -q3,  q0,  q1],
+             [-q3,  q2, -q1,  q0]]
+    """
+    q = as_float(q)
+    q0, q1, q2, q3 = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    rows = [
+        jnp.stack([-q1, q0, q3, -q2], axis=-1),
+        jnp.stack([-q2, -q3, q0, q1], axis=-1),
+        jnp.stack([-q3, q2, -q1, q0], axis=-1),
+    ]
+    return jnp.stack(rows, axis=-2)
+
+
+def w_matrix_space(q: ArrayLike) -> jax.Array:
+    """Space-frame counterpart of :func:`w_matrix`: ``ω_space = 2 W_s q̇``.
+
+    ``2 W_s q̇`` is the vector part of ``2 q̇ ⊗ q*`` (the chapter's eq. 17.41).
+
+    Args:
+        q: ``(..., 4)`` unit quaternion.
+
+    Returns:
+        ``(..., 3, 4)``::
+
+            [[-q1,  q0, -q3,  q2],
+             [-q2,  q3,  q0, -q1],
+             [-q3, -q2,  q1,  q0]]
+    """
+    q = as_float(q)
+    q0, q1, q2, q3 = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    rows = [
+        jnp.stack([-q1, q0, -q3, q2], axis=-1),
+        jnp.stack([-q2, q3, q0, -q1], axis=-1),
+        jnp.stack([-q3, -q2, q1, q0], axis=-1),
+    ]
+    return jnp.stack(rows, axis=-2)
+
+
+def _pure(v: jax.Array) -> jax.Array:
+    return jnp.concatenate([jnp.zeros_like(v[..., :1]), v], axis=-1)
+
+
+def derivative(q: ArrayLike, omega_body: ArrayLike) -> jax.Array:
+    """Quaternion rate ``q̇ = ½ q ⊗ (0, ω_body)`` (eq. 17.44, ``= ½ Wᵀ ω``).
+
+    Args:
+        q: ``(..., 4)`` unit quaternion (body → space).
+        omega_body: ``(..., 3)`` body-frame angular velocity; batch dimensions broadcast.
+
+    Returns:
+        ``(..., 4)`` time derivative of ``q``.
+    """
+    q, omega = as_float_pair(q, omega_body)
+    return 0.5 * multiply(q, _pure(omega))
+
+
+def derivative_space(q: ArrayLike, omega_space: ArrayLike) -> jax.Array:
+    """Quaternion rate from the space-frame angular velocity: ``q̇ = ½ (0, ω_space) ⊗ q``.
+
+    Args:
+        q: ``(..., 4)`` unit quaternion.
+        omega_space: ``(..., 3)`` space-frame angular velocity.
+
+    Returns:
+        ``(..., 4)``.
+    """
+    q, omega = as_float_pair(q, omega_space)
+    return 0.5 * multiply(_pure(omega), q)
+
+
+def angular_velocity(q: ArrayLike, qdot: ArrayLike) -> jax.Array:
+    """Body-frame angular velocity ``ω = 2 W q̇`` = vector part of ``2 q* ⊗ q̇`` (eq. 17.42).
+
+    Args:
+        q: ``(..., 4)`` unit quaternion.
+        qdot: ``(..., 4)`` its time derivative.
+
+    Returns:
+        ``(..., 3)`` body-frame angular velocity.
+    """
+    return 2.0 * multiply(conjugate(q), qdot)[..., 1:]
+
+
+def angular_velocity_space(q: ArrayLike, qdot: ArrayLike) -> jax.Array:
+    """Space-frame angular velocity = vector part of ``2 q̇ ⊗ q*`` (eq. 17.41).
+
+    Args:
+        q: ``(..., 4)`` unit quaternion.
+        qdot: ``(..., 4)`` its time derivative.
+
+    Returns:
+        ``(..., 3)`` space-frame angular velocity.
+    """
+    return 2.0 * multiply(qdot, conjugate(q))[..., 1:]

@@ -1,0 +1,271 @@
+"""Rotation matrices: quaternion ↔ active matrix, Rodrigues, and the chapter's passive forms.
+
+Active matrices map body to space, ``v_space = R @ v_body``, and agree with
+``scipy.spatial.transform.Rotation.from_quat(q, scalar_first=True).as_matrix()``.
+The chapter's (17.8), (17.10) and (17.28) are passive (coordinate-change) matrices,
+the transposes of the active ones; the functions reproducing them say ``passive``.
+"""
+
+from __future__ import annotations
+
+import numbers
+
+import jax
+import jax.numpy as jnp
+from jax.typing import ArrayLike
+
+from ._utils import as_float, as_float_all, as_float_pair, broadcast_batch
+
+__all__ = [
+    "from_matrix",
+    "passive_axis_matrix",
+    "passive_matrix",
+    "passive_zxz_matrix",
+    "project_to_rotation",
+    "rodrigues_matrix",
+    "to_matrix",
+]
+
+
+def to_matrix(q: ArrayLike) -> jax.Array:
+    """Active rotation matrix of a quaternion (the transpose of the chapter's eq. 17.28).
+
+    ``q`` need not be unit: it is normalised implicitly (the factor ``2/|q|²``), as
+    scipy does. A zero quaternion gives NaN (see :func:`check_quaternion`).
+
+    Args:
+        q: ``(..., 4)`` quaternion ``(w, x, y, z)``.
+
+    Returns:
+        ``(..., 3, 3)`` matrix ``R`` with ``R @ v = rotate(q, v)`` for unit ``q``.
+    """
+    q = as_float(q)
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    s = 2.0 / (w * w + x * x + y * y + z * z)
+    xx, yy, zz = s * x * x, s * y * y, s * z * z
+    xy, xz, yz = s * x * y, s * x * z, s * y * z
+    wx, wy, wz = s * w * x, s * w * y, s * w * z
+    rows = [
+        jnp.stack([1.0 - yy - zz, xy - wz, xz + wy], axis=-1),
+        jnp.stack([xy + wz, 1.0 - xx - zz, yz - wx], axis=-1),
+        jnp.stack([xz - wy, yz + wx, 1.0 - xx - yy], axis=-1),
+    ]
+    return jnp.stack(rows, axis=-2)
+
+
+def from_matrix(matrix: ArrayLike) -> jax.Array:
+    """Unit quaternion of an active rotation matrix (Shepperd's method).
+
+    Of the four equivalent expressions (pivoting on ``w``, ``x``, ``y`` or ``z``)
+    the one with the largest pivot ``max(tr R, R00, R11, R22)`` is used, so every
+    proper rotation, 180° rotations included, is converted accurately; the other
+    branches are kept finite so that gradients never contain NaN.
+
+    ``matrix`` is assumed to be a rotation. A slightly non-orthogonal input (e.g.
+    after accumulated rounding) gives the normalised Shepperd estimate, which agrees
+    with the nearest rotation to first order in the error. For inputs that may be far
+    from a rotation, call :func:`project_to_rotation` first (nearest rotation in the
+    Frobenius norm) or :func:`check_rotation_matrix` to raise an error.
+
+    Args:
+        matrix: ``(..., 3, 3)`` rotation matrix.
+
+    Returns:
+        ``(..., 4)`` unit quaternion (sign not canonicalised).
+    """
+    m = as_float(matrix)
+    m00, m01, m02 = m[..., 0, 0], m[..., 0, 1], m[..., 0, 2]
+    m10, m11, m12 = m[..., 1, 0], m[..., 1, 1], m[..., 1, 2]
+    m20, m21, m22 = m[..., 2, 0], m[..., 2, 1], m[..., 2, 2]
+    trace = m00 + m11 + m22
+    # Each candidate equals 4 * (pivot component) * (w, x, y, z).
+    cand_w = jnp.stack([1.0 + trace, m21 - m12, m02 - m20, m10 - m01], axis=-1)
+    cand_x = jnp.stack([m21 - m12, 1.0 + 2.0 * m00 - trace, m01 + m10, m02 + m20], axis=-1)
+    cand_y = jnp.stack([m02 - m20, m01 + m10, 1.0 + 2.0 * m11 - trace, m12 + m21], axis=-1)
+    cand_z = jnp.stack([m10 - m01, m02 + m20, m12 + m21, 1.0 + 2.0 * m22 - trace], axis=-1)
+    pivots = jnp.stack([trace, m00, m11, m22], axis=-1)
+    choice = jnp.argmax(pivots, axis=-1)[..., None]
+    cand = jnp.where(
+        choice == 0,
+        cand_w,
+        jnp.where(choice == 1, cand_x, jnp.where(choice == 2, cand_y, cand_z)),
+    )
+    # The chosen pivot entry is >= 1 for a rotation, so this norm is never zero.
+    return cand / jnp.sqrt(jnp.sum(cand * cand, axis=-1, keepdims=True))
+
+
+@jax.custom_jvp
+def _special_polar(m: jax.Array) -> jax.Array:
+    u, _, vt = jnp.linalg.svd(m)
+    d = _det_sign(u, vt)
+    return (u * _flip(d)[..., None, :]) @ vt
+
+
+def _det_sign(u: jax.Array, vt: jax.Array) -> jax.Array:
+    d = jnp.sign(jnp.linalg.det(u @ vt))
+    return jnp.where(d == 0, jnp.ones_like(d), d)
+
+
+def _flip(d: jax.Array) -> jax.Array:
+    """``(1, 1, d)`` along a new last axis."""
+    return jnp.concatenate([jnp.ones(d.shape + (2,), dtype=d.dtype), d[..., None]], axis=-1)
+
+
+@_special_polar.defjvp
+def _special_polar_jvp(primals, tangents):
+    # With M = U' S' Vᵀ (U' = U D, S' = D S, D = diag(1, 1, det UVᵀ)) and Q = U' Vᵀ:
+    # dQ = U' X Vᵀ, X_ij = (A_ij - A_ji) / (s'_i + s'_j), A = U'ᵀ dM V.
+    # JAX's SVD derivative divides by s_i² - s_j² and is NaN for repeated singular
+    # values (e.g. at any exact rotation); this formula only needs s'_i + s'_j != 0.
+    (m,), (dm,) = primals, tangents
+    u, s, vt = jnp.linalg.svd(m)
+    flip = _flip(_det_sign(u, vt))
+    u = u * flip[..., None, :]
+    s = s * flip
+    q = u @ vt
+    a = jnp.swapaxes(u, -1, -2) @ dm @ jnp.swapaxes(vt, -1, -2)
+    denom = s[..., :, None] + s[..., None, :]
+    ok = denom != 0
+    x = jnp.where(ok, (a - jnp.swapaxes(a, -1, -2)) / jnp.where(ok, denom, 1.0), 0.0)
+    return q, u @ x @ vt
+
+
+def project_to_rotation(matrix: ArrayLike) -> jax.Array:
+    """Nearest proper rotation in the Frobenius norm (special orthogonal Procrustes).
+
+    With ``M = U S Vᵀ`` the result is ``U diag(1, 1, det(U Vᵀ)) Vᵀ``. The derivative
+    is implemented analytically, so it is finite even where singular values repeat
+    (e.g. when ``M`` is already a rotation); it is undefined only where the smallest
+    two (sign-adjusted) singular values sum to zero.
+
+    Args:
+        matrix: ``(..., 3, 3)`` any real matrix.
+
+    Returns:
+        ``(..., 3, 3)`` rotation matrix.
+    """
+    return _special_polar(as_float(matrix))
+
+
+def rodrigues_matrix(axis: ArrayLike, angle: ArrayLike) -> jax.Array:
+    """Active rotation matrix about ``axis`` by ``angle`` (Rodrigues, eqs. 17.16-17.17).
+
+    ``R v = (1 - c)(v·r) r + s (r × v) + c v`` with ``c = cos θ``, ``s = sin θ`` and
+    ``r`` the unit axis; equal to ``to_matrix(from_axis_angle(axis, angle))``.
+
+    Args:
+        axis: ``(..., 3)`` rotation axis; normalised here (a zero axis gives NaN entries).
+        angle: ``(...)`` angle in radians; broadcasts with ``axis``.
+
+    Returns:
+        ``(..., 3, 3)`` active rotation matrix.
+    """
+    axis, angle = as_float_pair(axis, angle)
+    axis, angle = broadcast_batch(axis, 1, angle, 0)
+    r = axis / jnp.sqrt(jnp.sum(axis * axis, axis=-1, keepdims=True))
+    rx, ry, rz = r[..., 0], r[..., 1], r[..., 2]
+    c, s = jnp.cos(angle), jnp.sin(angle)
+    t = 1.0 - c
+    rows = [
+        jnp.stack([t * rx * rx + c, t * rx * ry - s * rz, t * rx * rz + s * ry], axis=-1),
+        jnp.stack([t * rx * ry + s * rz, t * ry * ry + c, t * ry * rz - s * rx], axis=-1),
+        jnp.stack([t * rx * rz - s * ry, t * ry * rz + s * rx, t * rz * rz + c], axis=-1),
+    ]
+    return jnp.stack(rows, axis=-2)
+
+
+_AXIS_INDEX = {"x": 0, "y": 1, "z": 2, 0: 0, 1: 1, 2: 2}
+
+
+def passive_axis_matrix(axis: int | str, angle: ArrayLike) -> jax.Array:
+    """The chapter's coordinate-axis rotation matrix (eq. 17.8), passive.
+
+    For the z axis this is ``[[c, s, 0], [-s, c, 0], [0, 0, 1]]``: it gives the
+    coordinates of a fixed vector in axes rotated by ``angle`` about z. It is the
+    transpose of the active ``rodrigues_matrix(e_axis, angle)``.
+
+    Args:
+        axis: ``0``/``1``/``2`` or ``"x"``/``"y"``/``"z"`` (case-insensitive); static.
+        angle: ``(...)`` angle in radians.
+
+    Returns:
+        ``(..., 3, 3)`` passive rotation matrix.
+
+    Raises:
+        ValueError: if ``axis`` is not one of the above.
+    """
+    key = axis.lower() if isinstance(axis, str) else axis
+    valid_type = isinstance(key, str) or (
+        isinstance(key, numbers.Integral) and not isinstance(key, bool)
+    )
+    if not valid_type or key not in _AXIS_INDEX:
+        raise ValueError(f"axis must be one of 0, 1, 2, 'x', 'y', 'z'; got {axis!r}")
+    i = _AXIS_INDEX[key]
+    j, k = (i + 1) % 3, (i + 2) % 3
+    angle = as_float(angle)
+    c, s = jnp.cos(angle), jnp.sin(angle)
+    one, zero = jnp.ones_like(c), jnp.zeros_like(c)
+    m = [[None] * 3 for _ in range(3)]
+    m[i][i], m[i][j], m[i][k] = one, zero, zero
+    m[j][i], m[k][i] = zero, zero
+    m[j][j], m[j][k] = c, s
+    m[k][j], m[k][k] = -s, c
+    return jnp.stack([jnp.stack(row, axis=-1) for row in m], axis=-2)
+
+
+def passive_zxz_matrix(phi: ArrayLike, theta: ArrayLike, psi: ArrayLike) -> jax.Array:
+    """The chapter's Euler-angle matrix ``R_z(ψ) R_x(θ) R_z(φ)`` (eq. 17.10), passive.
+
+    ``φ`` precession, ``θ`` nutation, ``ψ`` spin, each factor the passive (17.8). The
+    result is the transpose of the active matrix of ``from_euler("ZXZ", (φ, θ, ψ))``.
+    The printed (17.10) has scan errors in its last two rows; this is the corrected
+    matrix::
+
+        [[ cψcφ - cθsφsψ,   cψsφ + cθcφsψ,  sψsθ],
+         [-sψcφ - cθsφcψ,  -sψsφ + cθcφcψ,  cψsθ],
+         [ sθsφ,           -sθcφ,           cθ  ]]
+
+    Args:
+        phi: ``(...)`` precession angle.
+        theta: ``(...)`` nutation angle.
+        psi: ``(...)`` spin angle; the three broadcast (same rank or scalars).
+
+    Returns:
+        ``(..., 3, 3)`` passive rotation matrix.
+    """
+    phi, theta, psi = as_float_all(phi, theta, psi)
+    shape = jnp.broadcast_shapes(phi.shape, theta.shape, psi.shape)
+    phi, theta, psi = (jnp.broadcast_to(a, shape) for a in (phi, theta, psi))
+    cf, sf = jnp.cos(phi), jnp.sin(phi)
+    ct, st = jnp.cos(theta), jnp.sin(theta)
+    cp, sp = jnp.cos(psi), jnp.sin(psi)
+    rows = [
+        jnp.stack([cp * cf - ct * sf * sp, cp * sf + ct * cf * sp, sp * st], axis=-1),
+        jnp.stack([-sp * cf - ct * sf * cp, -sp * sf + ct * cf * cp, cp * st], axis=-1),
+        jnp.stack([st * sf, -st * cf, ct], axis=-1),
+    ]
+    return jnp.stack(rows, axis=-2)
+
+
+def passive_matrix(q: ArrayLike) -> jax.Array:
+    """The chapter's quaternion matrix (eq. 17.28), passive: the transpose of :func:`to_matrix`.
+
+    Written as printed: ``2 [[½ - q2² - q3², q1q2 + q0q3, q1q3 - q0q2], ...]``.
+    It maps space coordinates to body coordinates:
+    ``v_body = passive_matrix(q) @ v_space``.
+
+    Args:
+        q: ``(..., 4)`` quaternion (normalised implicitly, as in :func:`to_matrix`).
+
+    Returns:
+        ``(..., 3, 3)``.
+    """
+    q = as_float(q)
+    q = q / jnp.sqrt(jnp.sum(q * q, axis=-1, keepdims=True))
+    q0, q1, q2, q3 = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    rows = [
+        [0.5 - q2 * q2 - q3 * q3, q1 * q2 + q0 * q3, q1 * q3 - q0 * q2],
+        [q1 * q2 - q0 * q3, 0.5 - q1 * q1 - q3 * q3, q2 * q3 + q0 * q1],
+        [q1 * q3 + q0 * q2, q2 * q3 - q0 * q1, 0.5 - q1 * q1 - q2 * q2],
+    ]
+    return 2.0 * jnp.stack([jnp.stack(row, axis=-1) for row in rows], axis=-2)
