@@ -1,0 +1,477 @@
+"""Feynman's wobbling plate and Dzhanibekov's T-handle, measured against theory.
+
+``jrigid demo`` (or ``jrigid run demo``) simulates two torque-free bodies with
+:func:`jrigid.simulate`, measures one number on each, compares it with theory, draws both
+(stills and GIFs) and writes a one-page ``report.md``.
+
+**The wobbling plate** (Feynman, *Surely You're Joking*, pp. 157–158; chapter Problem
+17.4). A disk of radius ``r`` and thickness ``h`` (:func:`jrigid.inertia.disk`:
+``I1 = I2 = m(3r² + h²)/12``, ``I3 = m r²/2``) is tossed spinning about its symmetry axis
+with a small tilt, so the axis makes a constant angle ``θ`` with ``L``. In Euler angles
+about ``L`` (:mod:`jrigid.viz.angles`) the axis precesses ("wobbles") at ``φ̇ = |L|/I1``
+and the plate turns about its own axis at ``ψ̇ = ω3 (I1 − I3)/I1``, with
+``|L| cos θ = I3 ω3``. Hence the wobble-to-spin ratio
+
+    |φ̇/ψ̇| = I3 / ((I3 − I1) cos θ) = 2 / ((1 − h²/(3r²)) cos θ),
+
+which is ``2/cos θ`` for a thin plate: the wobble is twice as fast as the spin. The demo
+fits straight lines to the unwrapped angles and compares.
+
+**The T-handle** (Dzhanibekov effect; the unstable intermediate axis, Problem 17.6). A
+T-shaped body of two solid cylinders (:func:`jrigid.viz.shapes.t_handle_parts`, moments
+from :mod:`jrigid.inertia`) spins about its intermediate principal axis with a small
+tilt; it flips over and back periodically. With the moments sorted ``A < B < C``,
+``2E = Σ Iᵢωᵢ²`` and ``L² = Σ Iᵢ²ωᵢ²``, Euler's equations are solved by Jacobi elliptic
+functions (Landau & Lifshitz §37): for ``L² > 2EB``
+
+    λ² = (C − B)(L² − 2EA)/(ABC),   1 − m = (C − A)(L² − 2EB) / ((C − B)(L² − 2EA)),
+
+(``A`` and ``C`` swap when ``L² < 2EB``), and the intermediate component is
+``ω_B ∝ sn(λt + c | m)``, which changes sign every ``2K(m)/λ``: the flip interval. The
+full period (flip and flip back) is ``4K(m)/λ``. ``K`` comes from
+:func:`jrigid.special.ellipk` with the complementary parameter, accurate close to the
+separatrix (``m → 1``). The demo measures the times ``ω_B`` crosses zero and averages
+their spacing; if :mod:`jrigid.exact` is present it also compares ``ω(t)`` with the
+exact solution.
+
+Both simulations use the same number of output samples, so :func:`jrigid.simulate`
+compiles once. Frames for the GIFs are resampled at their own times (slerp), decoupled
+from the solver's steps.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jrigid import inertia, initial, viz
+from jrigid import quaternion as quat
+from jrigid.body import RigidBody
+from jrigid.report import Report, format_number
+from jrigid.scene import Scene
+from jrigid.simulate import simulate
+from jrigid.viz import shapes
+
+__all__ = [
+    "flip_theory",
+    "main",
+    "plate_moments",
+    "plate_theory",
+    "run_plate",
+    "run_t_handle",
+    "t_handle_moments",
+    "wobble_to_spin",
+    "zero_crossings",
+]
+
+
+# --------------------------------------------------------------------------- theory
+
+
+def plate_moments(mass: float, radius: float, thickness: float) -> np.ndarray:
+    """Principal moments ``(I1, I1, I3)`` of the plate (:func:`jrigid.inertia.disk`)."""
+    return np.asarray(inertia.disk(mass, radius, thickness), dtype=float)
+
+
+def plate_theory(moments, omega_body) -> dict:
+    """Exact torque-free rates of a symmetric body (``I1 = I2``, symmetry axis 3).
+
+    Args:
+        moments: ``(3,)`` with ``I1 = I2``.
+        omega_body: ``(3,)`` body angular velocity at any instant.
+
+    Returns:
+        dict with ``theta`` (axis–``L`` angle), ``precession_rate`` ``φ̇ = |L|/I1``,
+        ``spin_rate`` ``ψ̇ = ω3 (I1 − I3)/I1``, ``ratio`` ``|φ̇/ψ̇|`` and ``ratio_thin``
+        ``2/cos θ`` (the thin-plate value).
+    """
+    mom = np.asarray(moments, dtype=float)
+    w = np.asarray(omega_body, dtype=float)
+    L = np.linalg.norm(mom * w)
+    theta = math.acos(mom[2] * w[2] / L)
+    phi_dot = L / mom[0]
+    psi_dot = w[2] * (mom[0] - mom[2]) / mom[0]
+    return dict(
+        theta=theta,
+        precession_rate=phi_dot,
+        spin_rate=psi_dot,
+        ratio=abs(phi_dot / psi_dot),
+        ratio_thin=2.0 / math.cos(theta),
+    )
+
+
+@jax.jit
+def _part_tensor(m, radius, length, orientation, center):
+    """Tensor about the common centre of mass of one solid cylinder of the T-handle."""
+    I_axis = inertia.to_tensor(inertia.solid_cylinder(m, radius, length))
+    return inertia.parallel_axis(inertia.rotate_tensor(I_axis, orientation), m, center)
+
+
+def t_handle_moments(mass: float = 1.0, **dims) -> np.ndarray:
+    """Principal moments of the T-handle of :func:`jrigid.viz.shapes.t_handle_parts`.
+
+    Each solid cylinder's central tensor (:func:`jrigid.inertia.solid_cylinder`) is turned
+    onto its axis (:func:`jrigid.inertia.rotate_tensor`) and shifted to the common centre
+    of mass (:func:`jrigid.inertia.parallel_axis`). By the body's mirror symmetries the
+    sum is diagonal in body ``x, y, z``.
+
+    Returns:
+        ``(3,)`` moments about body ``x, y, z``.
+    """
+    total = np.zeros((3, 3))
+    for part in shapes.t_handle_parts(**dims):
+        m = mass * part["mass_fraction"]
+        args = (m, part["radius"], part["length"], part["orientation"], part["center"])
+        total = total + np.asarray(_part_tensor(*(jnp.asarray(a) for a in args)), dtype=float)
+    off = np.abs(total - np.diag(np.diag(total))).max()
+    if off > 1e-9 * np.abs(total).max():
+        raise ValueError(f"T-handle tensor is not diagonal (off-diagonal {off:.3g})")
+    return np.diag(total).copy()
+
+
+def flip_theory(moments, omega_body) -> dict:
+    """Flip interval ``2K(m)/λ`` and period ``4K(m)/λ`` of torque-free motion.
+
+    For any body with distinct moments and an initial body angular velocity; the
+    intermediate axis is the one with the middle moment. Formulas in the module docstring;
+    ``1 − m`` is computed without cancellation from the components of ``ω``.
+
+    Args:
+        moments: ``(3,)`` distinct principal moments (any order).
+        omega_body: ``(3,)``.
+
+    Returns:
+        dict with ``flip_interval``, ``period``, ``m``, ``m1`` (``1 − m``), ``lam`` and
+        ``axis`` (index of the intermediate axis).
+    """
+    from jrigid import special
+
+    mom = np.asarray(moments, dtype=float)
+    w = np.asarray(omega_body, dtype=float)
+    a, b, c = (int(k) for k in np.argsort(mom))
+    A, B, C = mom[a], mom[b], mom[c]
+    wa, wb, wc = w[a], w[b], w[c]
+    # exact differences, free of cancellation
+    L2_2EB = A * (A - B) * wa**2 + C * (C - B) * wc**2  # L² − 2EB
+    L2_2EA = B * (B - A) * wb**2 + C * (C - A) * wc**2  # L² − 2EA  (> 0)
+    EC2_L2 = A * (C - A) * wa**2 + B * (C - B) * wb**2  # 2EC − L²  (> 0)
+    if L2_2EB >= 0:  # ω circulates about the axis of largest moment
+        lam = math.sqrt((C - B) * L2_2EA / (A * B * C))
+        m1 = (C - A) * L2_2EB / ((C - B) * L2_2EA)
+    else:  # ... about the axis of smallest moment
+        lam = math.sqrt((B - A) * EC2_L2 / (A * B * C))
+        m1 = (C - A) * (-L2_2EB) / ((B - A) * EC2_L2)
+    K = float(special.ellipk(m1=jnp.asarray(m1)))
+    return dict(flip_interval=2 * K / lam, period=4 * K / lam, m=1 - m1, m1=m1, lam=lam, axis=b)
+
+
+# --------------------------------------------------------------------------- measurement
+
+
+def wobble_to_spin(ts, q, L_space, axis: int = 2) -> dict:
+    """Measured precession and spin rates of body axis ``axis`` about ``L`` (line fits).
+
+    Returns:
+        dict with ``precession_rate``, ``spin_rate``, ``ratio`` ``|φ̇/ψ̇|`` and the mean
+        nutation ``theta``.
+    """
+    ang = viz.euler_about(q, L_space, axis=axis)
+    phi_dot = viz.fit_rate(ts, ang[:, 0])
+    psi_dot = viz.fit_rate(ts, ang[:, 2])
+    return dict(
+        precession_rate=phi_dot,
+        spin_rate=psi_dot,
+        ratio=abs(phi_dot / psi_dot),
+        theta=float(np.mean(ang[:, 1])),
+    )
+
+
+def zero_crossings(ts, x) -> np.ndarray:
+    """Times where the samples ``x`` change sign (linear interpolation between samples)."""
+    ts, x = np.asarray(ts, float), np.asarray(x, float)
+    i = np.nonzero(np.sign(x[:-1]) * np.sign(x[1:]) < 0)[0]
+    return ts[i] - x[i] * (ts[i + 1] - ts[i]) / (x[i + 1] - x[i])
+
+
+# --------------------------------------------------------------------------- simulation
+
+
+def _align(v) -> jax.Array:
+    """Quaternion turning the direction of ``v`` (body) onto space ``z`` (L drawn upright)."""
+    v = np.asarray(v, float) / np.linalg.norm(v)
+    axis = np.cross(v, [0.0, 0.0, 1.0])
+    s = np.linalg.norm(axis)
+    if s < 1e-12:
+        return quat.identity()
+    return quat.from_axis_angle(jnp.asarray(axis / s), jnp.asarray(math.atan2(s, v[2])))
+
+
+def _simulate(moments, omega0, t_end, n_samples):
+    scene = Scene(RigidBody(jnp.asarray(moments)))
+    L_body = np.asarray(moments) * np.asarray(omega0)
+    state = initial.from_omega(_align(L_body), jnp.asarray(omega0))
+    ts = jnp.linspace(0.0, t_end, n_samples)
+    return simulate(scene, state, ts, rtol=1e-10, atol=1e-12)
+
+
+def _exact_check(moments, traj) -> dict | None:
+    """Compare with :mod:`jrigid.exact` (closed form) if that module is present.
+
+    Returns:
+        ``None`` without the module, else a dict with ``omega_error`` (largest
+        ``|ω − ω_exact|`` over ``max |ω|``), ``q_error`` (largest rotation angle between the
+        simulated and exact orientations, radians) and ``period`` (the exact period of ω).
+    """
+    try:
+        from jrigid import exact
+    except ImportError:
+        return None
+
+    @jax.jit
+    def compare(moments, q, omega, ts):
+        q_exact, w_exact = exact.solve(moments, q[0], omega[0], ts)
+        omega_error = jnp.max(jnp.linalg.norm(omega - w_exact, axis=-1))
+        q_error = jnp.max(quat.distance(q, q_exact))
+        return omega_error, q_error, exact.omega_period(exact.prepare(moments, q[0], omega[0]))
+
+    omega_error, q_error, period = compare(jnp.asarray(moments), traj.q, traj.omega, traj.ts)
+    w = np.asarray(traj.omega)
+    return dict(
+        omega_error=float(omega_error / np.max(np.linalg.norm(w, axis=-1))),
+        q_error=float(q_error),
+        period=float(period),
+    )
+
+
+# --------------------------------------------------------------------------- main
+
+
+def _row(name, measured, theory):
+    rel = abs(measured - theory) / abs(theory) if theory else float("nan")
+    return (name, measured, theory, f"{rel:.1e}")
+
+
+def _print_rows(rows) -> None:
+    for name, meas, theo, rel in rows:
+        print(f"  {name:<32} measured {meas:12.8f}   theory {theo:12.8f}   rel. diff {rel}")
+
+
+def run_plate(radius, thickness, tilt_deg, spin_hz, n_samples, wobbles) -> dict:
+    """Simulate the plate for ``wobbles`` precession periods and measure its rates.
+
+    Returns:
+        dict with the trajectory ``traj``, ``moments``, ``omega0``, ``theory``
+        (:func:`plate_theory`), ``measured`` (:func:`wobble_to_spin`) and table ``rows``.
+    """
+    moments = plate_moments(1.0, radius, thickness)
+    w3 = 2 * math.pi * spin_hz
+    # tilt θ between the symmetry axis and L: tan θ = I1 ω⊥ / (I3 ω3)
+    w_perp = w3 * math.tan(math.radians(tilt_deg)) * moments[2] / moments[0]
+    omega0 = np.array([w_perp, 0.0, w3])
+    theory = plate_theory(moments, omega0)
+    period = 2 * math.pi / theory["precession_rate"]
+    traj = _simulate(moments, omega0, wobbles * period, n_samples)
+    measured = wobble_to_spin(traj.ts, traj.q, traj.L_space, axis=2)
+    rows = [
+        _row("wobble/spin |φ̇/ψ̇|", measured["ratio"], theory["ratio"]),
+        _row("precession φ̇ (rad/s)", measured["precession_rate"], theory["precession_rate"]),
+        _row("spin ψ̇ (rad/s)", measured["spin_rate"], theory["spin_rate"]),
+    ]
+    return dict(traj=traj, moments=moments, omega0=omega0, theory=theory, measured=measured,
+                rows=rows, wobble_period=period)  # fmt: skip
+
+
+def run_t_handle(tilt_deg, spin_hz, n_samples, intervals, compare_exact) -> dict:
+    """Simulate the T-handle for ``intervals`` flip intervals and time its flips.
+
+    Returns:
+        dict with ``traj``, ``moments``, ``omega0``, the intermediate axis ``mid``,
+        ``theory`` (:func:`flip_theory`), ``crossings``, ``flip_interval`` (measured),
+        ``exact`` (:func:`_exact_check` or ``None``) and table ``rows``.
+    """
+    moments = t_handle_moments(1.0)
+    _, mid, top = (int(k) for k in np.argsort(moments))
+    eps, rate = math.radians(tilt_deg), 2 * math.pi * spin_hz
+    omega0 = np.zeros(3)
+    omega0[mid], omega0[top] = rate * math.cos(eps), rate * math.sin(eps)
+    theory = flip_theory(moments, omega0)
+    traj = _simulate(moments, omega0, intervals * theory["flip_interval"], n_samples)
+    crossings = zero_crossings(traj.ts, traj.omega[:, mid])
+    measured = float(np.mean(np.diff(crossings))) if len(crossings) >= 2 else float("nan")
+    exact = _exact_check(moments, traj) if compare_exact else None
+    rows = [_row("flip interval 2K/λ (s)", measured, theory["flip_interval"])]
+    if exact is not None:
+        rows.append(_row("flip interval, jrigid.exact (s)", measured, exact["period"] / 2))
+    return dict(traj=traj, moments=moments, omega0=omega0, mid=mid, theory=theory,
+                crossings=crossings, flip_interval=measured, exact=exact, rows=rows,
+                turn=2 * math.pi / rate)  # fmt: skip
+
+
+def _plate_section(rep: Report, p: dict, radius, thickness, spin_hz, frames, fps, gif) -> None:
+    th, traj = p["theory"], p["traj"]
+    rep.text("## Feynman's wobbling plate")
+    rep.text(
+        f"A plate of radius {radius:g} and thickness {thickness:g} spins at {spin_hz:g} Hz "
+        f"about its symmetry axis, which is tilted by θ = {math.degrees(th['theta']):.2f}° "
+        "from the angular momentum L. The axis wobbles (precesses about L) at φ̇ = |L|/I1 "
+        "while the plate turns about its own axis at ψ̇ = ω3 (I1 − I3)/I1, so "
+        "|φ̇/ψ̇| = I3/((I3 − I1) cos θ) = 2/((1 − h²/3r²) cos θ): "
+        f"{th['ratio']:.6f} here, {th['ratio_thin']:.6f} for a thin plate."
+    )
+    rep.table(p["rows"], headers=("quantity", "measured", "theory", "rel. diff"), digits=9)
+    mesh = viz.disk(radius, thickness)
+    dt = float(traj.ts[1] - traj.ts[0])
+    fig = viz.space_body_views(traj, mesh, trail=int(p["wobble_period"] / dt), dpi=80)
+    rep.figure("plate", fig, caption="plate: space frame (left) and body frame (right)", dpi=80)
+    fig = viz.plot_precession_nutation(traj, axis=2)
+    rep.figure("plate_angles", fig, caption="precession φ, spin ψ and nutation θ about L", dpi=80)
+    if gif:
+        turn = 2 * math.pi / float(np.linalg.norm(p["omega0"]))
+        # three wobbles, at most 45° of turning per frame (no aliasing)
+        span = min(float(traj.ts[-1]), 3 * p["wobble_period"], frames * turn / 8)
+        paths = viz.animate(traj, mesh, rep.path("plate.gif"), n_frames=frames, fps=fps,
+                            t_span=(0.0, span), trail=frames // 3, size_px=(400, 200))  # fmt: skip
+        rep.image(paths[0], "the wobbling plate")
+
+
+def _t_handle_section(rep: Report, h: dict, tilt_deg, spin_hz, frames, fps, gif) -> None:
+    th, traj, mid = h["theory"], h["traj"], h["mid"]
+    rep.text("## Dzhanibekov's T-handle")
+    rep.text(
+        f"A T-handle with moments {', '.join(format_number(x, 5) for x in h['moments'])} spins "
+        f"at {spin_hz:g} Hz about its intermediate axis {mid + 1}, tilted by {tilt_deg:g}°. "
+        f"It flips over every 2K(m)/λ (Jacobi elliptic functions; 1 − m = {th['m1']:.3e}); "
+        f"the measured interval is the mean spacing of the zero crossings of ω{mid + 1}."
+    )
+    rep.table(h["rows"], headers=("quantity", "measured", "theory", "rel. diff"), digits=9)
+    if h["exact"] is not None:
+        rep.text(
+            "Against the closed-form solution `jrigid.exact.solve`: largest relative "
+            f"difference in ω {h['exact']['omega_error']:.2e}, largest orientation "
+            f"difference {h['exact']['q_error']:.2e} rad."
+        )
+    fig = viz.plot_omega(traj)
+    for t in h["crossings"]:
+        fig.axes[0].axvline(t, color="#999999", lw=0.8, ls="--")
+    rep.figure("t_handle_omega", fig, caption="body angular velocity; dashed: flips", dpi=80)
+    mesh = viz.t_handle()
+    dt = float(traj.ts[1] - traj.ts[0])
+    fig = viz.space_body_views(traj, mesh, trail=int(1.5 * h["turn"] / dt), dpi=80)
+    rep.figure("t_handle", fig, caption="T-handle: space frame and body frame", dpi=80)
+    if gif:
+        # two flips, at most 45° of turning per frame (no aliasing)
+        span = min(float(traj.ts[-1]), 1.8 * th["flip_interval"], frames * h["turn"] / 8)
+        paths = viz.animate(traj, mesh, rep.path("t_handle.gif"), n_frames=frames, fps=fps,
+                            t_span=(0.0, span), trail=max(2, int(1.5 * h["turn"] * frames / span)),
+                            size_px=(400, 200))  # fmt: skip
+        rep.image(paths[0], "the T-handle flipping")
+
+
+def main(
+    out_dir,
+    quick: bool = False,
+    *,
+    radius: float = 1.0,
+    thickness: float = 0.1,
+    tilt_deg: float = 10.0,
+    spin_hz: float = 1.0,
+    handle_tilt_deg: float = 1.0,
+    handle_spin_hz: float = 1.5,
+    frames: int = 90,
+    fps: int = 20,
+    gif: bool = True,
+    compare_exact: bool = True,
+) -> dict:
+    """Run the demo and write ``report.md``, figures, GIFs and ``numbers.json`` to ``out_dir``.
+
+    Args:
+        out_dir: results folder.
+        quick: shorter runs and fewer frames (for tests).
+        radius, thickness: the plate's size (mass 1).
+        tilt_deg: angle between the plate's symmetry axis and ``L``.
+        spin_hz: the plate's spin ``ω3 / 2π``.
+        handle_tilt_deg: tilt of the T-handle's initial ω from its intermediate axis.
+        handle_spin_hz: the T-handle's ``|ω| / 2π``.
+        frames, fps: frames per GIF and playback rate.
+        gif: write the animations.
+        compare_exact: compare the T-handle with :mod:`jrigid.exact` when present (its
+            compilation takes several seconds; skipped with ``quick``).
+
+    Returns:
+        the measured and theoretical numbers (also in ``numbers.json``).
+    """
+    start = time.perf_counter()
+    n_samples = 401 if quick else 1201  # both runs alike: one compilation
+    frames = min(frames, 24) if quick else frames
+    p = run_plate(radius, thickness, tilt_deg, spin_hz, n_samples, 2.5 if quick else 6.0)
+    t_first = time.perf_counter() - start
+    h = run_t_handle(handle_tilt_deg, handle_spin_hz, n_samples, 2.6 if quick else 4.6,
+                     compare_exact and not quick)  # fmt: skip
+    drift = max(
+        float(np.max(np.abs(np.asarray(tr.energy) / float(tr.energy[0]) - 1)))
+        for tr in (p["traj"], h["traj"])
+    )
+    dtype = str(jnp.result_type(float))
+
+    print(f"Feynman's wobbling plate: r = {radius:g}, h = {thickness:g}, "
+          f"tilt θ = {math.degrees(p['theory']['theta']):.2f}°")  # fmt: skip
+    _print_rows(p["rows"])
+    print(f"  (thin-plate value 2/cos θ = {p['theory']['ratio_thin']:.6f}: "
+          "the plate wobbles about twice as fast as it spins)")  # fmt: skip
+    print(f"Dzhanibekov T-handle: moments {np.array2string(h['moments'], precision=5)}, "
+          f"spin about axis {h['mid'] + 1} (intermediate) tilted {handle_tilt_deg:g}°")  # fmt: skip
+    _print_rows(h["rows"])
+    print(f"  (1 − m = {h['theory']['m1']:.3e}; full period 4K/λ = {h['theory']['period']:.6f} s; "
+          f"{len(h['crossings'])} flips seen)")  # fmt: skip
+    if h["exact"] is not None:
+        print(f"  against jrigid.exact: ω max relative error {h['exact']['omega_error']:.2e}, "
+              f"orientation max error {h['exact']['q_error']:.2e} rad")  # fmt: skip
+
+    rep = Report(Path(out_dir), title="jrigid demo: a wobbling plate and a flipping T-handle")
+    rep.text(
+        f"Made by `jrigid demo{' --quick' if quick else ''}`. Both bodies are torque free, "
+        "integrated by `jrigid.simulate` (quaternion acceleration, Tsit5, rtol 1e-10) in "
+        f"{dtype}; largest relative energy drift {drift:.1e}."
+    )
+    _plate_section(rep, p, radius, thickness, spin_hz, frames, fps, gif)
+    _t_handle_section(rep, h, handle_tilt_deg, handle_spin_hz, frames, fps, gif)
+
+    th, meas = p["theory"], p["measured"]
+    numbers = {
+        "plate": {
+            "moments": p["moments"],
+            "tilt_theta_deg": math.degrees(th["theta"]),
+            "wobble_to_spin_measured": meas["ratio"],
+            "wobble_to_spin_theory": th["ratio"],
+            "wobble_to_spin_thin_plate": th["ratio_thin"],
+            "precession_rate_measured": meas["precession_rate"],
+            "precession_rate_theory": th["precession_rate"],
+            "spin_rate_measured": meas["spin_rate"],
+            "spin_rate_theory": th["spin_rate"],
+        },
+        "t_handle": {
+            "moments": h["moments"],
+            "intermediate_axis": h["mid"] + 1,
+            "flip_interval_measured": h["flip_interval"],
+            "flip_interval_theory": h["theory"]["flip_interval"],
+            "period_theory": h["theory"]["period"],
+            "elliptic_m1": h["theory"]["m1"],
+            "flips_seen": len(h["crossings"]),
+            "exact_solution": h["exact"],
+        },
+        "max_relative_energy_drift": drift,
+        "dtype": dtype,
+        "quick": quick,
+    }
+    seconds = time.perf_counter() - start
+    numbers["seconds"] = {"total": seconds, "first_simulation_incl_compile": t_first}
+    rep.numbers(numbers)
+    rep.text(f"Total time {seconds:.1f} s (first simulation, with compilation, {t_first:.1f} s).")
+    path = rep.write_summary()
+    print(f"wrote {path}")
+    return numbers
