@@ -194,3 +194,17 @@ def test_float32(float32):
         assert_same_rotation(back, q, atol=2e-6)
         np.testing.assert_array_equal(locked[:, 2], 0.0)
         assert_same_rotation(locked_back, ql, atol=5e-6)
+
+
+@pytest.mark.filterwarnings("ignore:Gimbal lock detected")
+@pytest.mark.parametrize("seq", ["ZXZ", "zxz", "XYX", "yzy"])
+def test_symmetric_middle_angle_at_pi_is_plus_pi(seq):
+    """A half turn about the middle axis gives θ = +π (scipy's value, inside [0, π])."""
+    axis = {"x": 0, "y": 1, "z": 2}[seq[1].lower()]
+    rotvec = np.zeros(3)
+    rotvec[axis] = np.pi
+    q = Rotation.from_rotvec(rotvec).as_quat(scalar_first=True)
+    angles = np.asarray(jq.to_euler(seq, jnp.asarray(q)))
+    expected = Rotation.from_quat(q, scalar_first=True).as_euler(seq)
+    np.testing.assert_allclose(angles[1], np.pi, atol=1e-12)
+    np.testing.assert_allclose(angles[1], expected[1], atol=1e-12)

@@ -185,5 +185,7 @@ def to_euler(seq: str, q: ArrayLike, eps: float | None = None) -> jax.Array:
             first = sign * first
     if not symmetric:
         middle = middle - 0.5 * math.pi
-    angles = jnp.stack([first, middle, third], axis=-1)
-    return jnp.remainder(angles + math.pi, 2.0 * math.pi) - math.pi
+    # Only the first and third angles wrap to [-π, π); the middle one already lies in
+    # [0, π] (symmetric) or [-π/2, π/2] (Tait-Bryan), and wrapping it would turn π into -π.
+    first, third = (jnp.remainder(a + math.pi, 2.0 * math.pi) - math.pi for a in (first, third))
+    return jnp.stack([first, middle, third], axis=-1)
