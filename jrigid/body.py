@@ -1,0 +1,148 @@
+"""Rigid bodies: principal moments, mass and where the centre of mass sits.
+
+A :class:`RigidBody` is described in its *principal* body frame: the inertia tensor about
+the centre of mass is ``diag(moments)`` there (chapter Table 17.1 and eq. 17.31). A body
+given by a full tensor is diagonalised once (:meth:`RigidBody.from_tensor`); the rotation
+from the principal frame back to the frame the tensor was given in is kept in
+:attr:`RigidBody.frame`, so results can be mapped back.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jax.typing import ArrayLike
+
+from jrigid import inertia
+from jrigid import quaternion as quat
+
+__all__ = ["RigidBody"]
+
+
+def _float(x: ArrayLike) -> jax.Array:
+    """A strongly typed float array (weak types would change the compiled signature)."""
+    x = jnp.asarray(x)
+    dtype = x.dtype if jnp.issubdtype(x.dtype, jnp.floating) else jnp.result_type(float)
+    return jnp.asarray(x, dtype=jax.dtypes.canonicalize_dtype(dtype))
+
+
+def _concrete(*xs) -> bool:
+    return not any(isinstance(x, jax.core.Tracer) for x in xs)
+
+
+class RigidBody(eqx.Module):
+    """A rigid body in its principal frame.
+
+    Attributes:
+        moments: ``(3,)`` principal moments of inertia ``(I1, I2, I3)`` **about the centre
+            of mass**, along the body axes 1, 2, 3. A scene held at a pivot adds the
+            parallel-axis shift itself (see :class:`jrigid.scene.Pivot`).
+        mass: ``()`` total mass ``M > 0``.
+        com: ``(3,)`` centre of mass relative to the support point, in body (principal)
+            coordinates. Only a pivoted scene uses it; for free rotation and free flight
+            the body turns about its centre of mass.
+        frame: ``(4,)`` unit quaternion taking principal-frame vectors to the frame the
+            body was specified in (``identity`` when built from moments): a vector
+            ``v`` in principal coordinates is ``quaternion.rotate(frame, v)`` in the
+            original coordinates. See :meth:`reference_orientation`.
+        allow_nonphysical: static; skip the triangle inequality ``Ia + Ib ≥ Ic`` (e.g.
+            for the Hairer–Lubich–Wanner test body ``(2, 1, 2/3)``).
+
+    Construction with concrete values validates them and raises ``ValueError`` for a
+    non-finite, non-positive or (unless allowed) non-physical inertia, a non-positive
+    mass or a non-finite centre of mass. Inside a JAX transformation the checks are
+    deferred to :func:`jrigid.simulate`, which runs them with ``equinox.error_if``.
+    """
+
+    moments: jax.Array = eqx.field(converter=_float)
+    mass: jax.Array = eqx.field(converter=_float, default=1.0)
+    com: jax.Array = eqx.field(converter=_float, default=(0.0, 0.0, 0.0))
+    frame: jax.Array = eqx.field(converter=_float, default=(1.0, 0.0, 0.0, 0.0))
+    allow_nonphysical: bool = eqx.field(static=True, default=False, kw_only=True)
+
+    def __check_init__(self):
+        if self.moments.shape[-1:] != (3,):
+            raise ValueError(f"moments must have shape (..., 3), got {self.moments.shape}")
+        if self.com.shape[-1:] != (3,):
+            raise ValueError(f"com must have shape (..., 3), got {self.com.shape}")
+        if self.frame.shape[-1:] != (4,):
+            raise ValueError(f"frame must have shape (..., 4), got {self.frame.shape}")
+        if not _concrete(self.moments, self.mass, self.com):
+            return
+        inertia.validate(
+            self.moments, kind="moments", allow_nonphysical=self.allow_nonphysical
+        )
+        if not bool(jnp.all(jnp.isfinite(self.mass) & (self.mass > 0))):
+            raise ValueError(f"mass must be finite and positive, got {self.mass}")
+        if not bool(jnp.all(jnp.isfinite(self.com))):
+            raise ValueError(f"com must be finite, got {self.com}")
+
+    @classmethod
+    def from_tensor(
+        cls,
+        tensor: ArrayLike,
+        mass: ArrayLike = 1.0,
+        com: ArrayLike = (0.0, 0.0, 0.0),
+        *,
+        allow_nonphysical: bool = False,
+    ) -> RigidBody:
+        """Build a body from a full inertia tensor about its centre of mass.
+
+        The tensor is diagonalised once with :func:`jrigid.inertia.principal_axes`
+        (moments ascending). The simulation then runs in the principal frame; ``frame``
+        keeps the principal → given-frame rotation.
+
+        Args:
+            tensor: ``(3, 3)`` symmetric inertia tensor about the centre of mass, in some
+                body-fixed reference frame.
+            mass: total mass.
+            com: ``(3,)`` centre of mass relative to the support point, **in the same
+                reference frame as** ``tensor``; it is rotated into the principal frame.
+            allow_nonphysical: skip the triangle inequality.
+
+        Returns:
+            A :class:`RigidBody`.
+
+        Raises:
+            ValueError: for a non-symmetric, non-finite or non-physical tensor (concrete
+                values only).
+        """
+        tensor = _float(tensor)
+        if tensor.shape[-2:] != (3, 3):
+            raise ValueError(f"tensor must have shape (..., 3, 3), got {tensor.shape}")
+        if _concrete(tensor):
+            inertia.validate(tensor, kind="tensor", allow_nonphysical=allow_nonphysical)
+        moments, frame = inertia.principal_axes(tensor)
+        com_principal = quat.rotate_inverse(frame, _float(com))
+        return cls(moments, mass, com_principal, frame, allow_nonphysical=allow_nonphysical)
+
+    def tensor(self) -> jax.Array:
+        """``(3, 3)`` inertia tensor about the centre of mass in the principal frame."""
+        return self.moments[..., :, None] * jnp.eye(3, dtype=self.moments.dtype)
+
+    def reference_orientation(self, q: ArrayLike) -> jax.Array:
+        """Orientation of the body's reference frame given the principal-frame one.
+
+        Simulations evolve the orientation ``q`` of the principal frame (body → space).
+        The frame the body was specified in then has orientation ``q ⊗ frame*``.
+
+        Args:
+            q: ``(..., 4)`` principal-frame orientation.
+
+        Returns:
+            ``(..., 4)`` reference-frame orientation.
+        """
+        return quat.multiply(q, quat.conjugate(self.frame))
+
+    def check(self) -> RigidBody:
+        """Jit-safe validation (``equinox.error_if``); returns the body unchanged."""
+        moments = inertia.check(
+            self.moments, kind="moments", allow_nonphysical=self.allow_nonphysical
+        )
+        mass = eqx.error_if(
+            self.mass, ~(jnp.isfinite(self.mass) & (self.mass > 0)),
+            "RigidBody: mass must be finite and positive",
+        )
+        com = eqx.error_if(self.com, ~jnp.isfinite(self.com), "RigidBody: com must be finite")
+        return eqx.tree_at(lambda b: (b.moments, b.mass, b.com), self, (moments, mass, com))

@@ -1,0 +1,320 @@
+"""Equations of motion as pure vector fields, one class per choice of variables.
+
+Every formulation turns the user's :class:`~jrigid.state.State` into its own variables
+(:meth:`~AbstractFormulation.from_state`), evaluates ``dy/dt`` for one scene
+(:meth:`~AbstractFormulation.vector_field`, the diffrax ``f(t, y, args)`` with
+``args = scene``), and reports the kinematics of a state
+(:meth:`~AbstractFormulation.kinematics`). All act on one unbatched state.
+
+- ``quaternion_acceleration`` (default): variables ``(q, q̇[, x, v])``; ω from (17.42),
+  ω̇ from Euler's equations (17.34/17.35), q̈ from (17.50);
+- ``quaternion_omega``: ``(q, ω[, x, v])``; q̇ from (17.44), ω̇ from (17.34/17.35);
+- ``body_omega``: ``ω`` alone, (17.35); no orientation (Problem 17.3);
+- ``euler_angles``: ``((φ, θ, ψ), ω[, x, v])`` ZXZ; angle rates by inverting (17.36),
+  ω̇ from (17.35).
+
+**Quaternion acceleration (17.50).** With ``q̇ = ½ q ⊗ (0, ω)``,
+``q̈ = ½ q̇ ⊗ (0, ω) + ½ q ⊗ (0, ω̇) = ½ q ⊗ (0, ω̇) − ¼ |ω|² q`` on ``|q| = 1``; since
+``|q̇|² = ¼ |ω|²`` there this is the chapter's ``q̈ = ½ Wᵀ (ω̇, −2 Σ q̇ₘ²)``, i.e.
+``q̈ = ½ q ⊗ (0, ω̇) − |q̇|² q``, which is what is integrated. The constraint manifold
+``|q|² = 1, q·q̇ = 0`` is invariant: with ``e = |q|² − 1`` and ``c = q·q̇`` the exact
+flow gives ``ė = 2c``, ``ċ = −|q̇|² e``, a neutral oscillation, so numerical errors
+accumulate. Two remedies: projection after each step (:meth:`project`, used by
+:func:`jrigid.simulate` through :class:`jrigid.simulate.ProjectedSolver`) and the
+stabilising term ``−(2k c + ½ k² e) q / |q|²`` added to ``q̈`` (``stabilization = γ``,
+``k = γ |ω|``), which turns the residual dynamics into
+``ë + 2k ė + (k² + 2|q̇|²) e = 0``: a decay at rate ``k`` without stiffness. The term
+leaves ``vec(q* ⊗ q̇)`` alone, so as it pulls ``|q|`` back to one it rescales
+``ω = 2 vec(q* ⊗ q̇)/|q|²``: measured over long runs, the energy error grows by
+1.5–60× (see :mod:`jrigid.simulate`), which is why projection is the default.
+
+**Euler angles.** Inverting (17.36): ``φ̇ = (ω1 sin ψ + ω2 cos ψ)/sin θ``,
+``θ̇ = ω1 cos ψ − ω2 sin ψ``, ``ψ̇ = ω3 − φ̇ cos θ``. The rates blow up as
+``sin θ → 0`` (gimbal lock): the formulation supplies a terminating diffrax event at
+``|sin θ| < min_sin_theta`` or at a change of sign of ``sin θ`` within a step, which
+:func:`jrigid.simulate` reports as a failure (an initial state at gimbal lock is
+rejected).
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from jrigid import quaternion as quat
+from jrigid.scene import Scene
+from jrigid.state import Kinematics, State, omega_from_rate
+
+__all__ = [
+    "AbstractFormulation",
+    "BodyOmega",
+    "EulerAngles",
+    "EulerState",
+    "FORMULATIONS",
+    "QuaternionAcceleration",
+    "QuaternionOmega",
+    "QuaternionOmegaState",
+    "get_formulation",
+]
+
+
+def _pure(v: jax.Array) -> jax.Array:
+    return jnp.concatenate([jnp.zeros(1, v.dtype), v])
+
+
+def _translation_rates(scene: Scene, v, force):
+    if not scene.translates:
+        return None, None
+    return v, force / scene.body.mass
+
+
+class AbstractFormulation(eqx.Module):
+    """Interface of a formulation (all methods act on one unbatched state).
+
+    Class attributes: ``name`` (str) and ``has_orientation`` (bool).
+    """
+
+    name: ClassVar[str]
+    has_orientation: ClassVar[bool] = True
+    carries_quaternion: ClassVar[bool] = False
+
+    def check_scene(self, scene: Scene) -> None:
+        """Raise ``ValueError`` if the formulation cannot represent ``scene``."""
+
+    def from_state(self, scene: Scene, state: State):
+        """Formulation variables from a :class:`~jrigid.state.State` (``q`` unit)."""
+        raise NotImplementedError
+
+    def kinematics(self, scene: Scene, y) -> Kinematics:
+        """:class:`~jrigid.state.Kinematics` of a state (``q`` normalised)."""
+        raise NotImplementedError
+
+    def vector_field(self, t, y, scene: Scene):
+        """``dy/dt`` (the diffrax vector field with ``args = scene``)."""
+        raise NotImplementedError
+
+    def project(self, y, scene: Scene):
+        """Nearest point of the constraint manifold (identity if there is none)."""
+        return y
+
+    def raw_quaternion(self, y) -> jax.Array | None:
+        """The integrated, unnormalised ``q`` (``None`` if not a variable)."""
+        return None
+
+    def tangent_error(self, y) -> jax.Array | None:
+        """``q·q̇`` for a formulation that carries ``q̇`` (else ``None``)."""
+        return None
+
+    def event(self) -> diffrax.Event | None:
+        """A terminating diffrax event signalling a breakdown, or ``None``."""
+        return None
+
+    def domain_error(self, scene: Scene, state: State) -> tuple[jax.Array, str] | None:
+        """``(bad, message)`` if an initial state can lie outside the formulation's domain."""
+        return None
+
+
+class QuaternionAcceleration(AbstractFormulation):
+    """State ``(q, q̇)``: ω from (17.42), ω̇ from Euler's equations, q̈ from (17.50).
+
+    Attributes:
+        stabilization: ``γ ≥ 0``, gain of the constraint-stabilising term
+            ``−(2k (q·q̇) + ½ k² (|q|² − 1)) q / |q|²`` with ``k = γ |ω|`` (0 = off).
+    """
+
+    name: ClassVar[str] = "quaternion_acceleration"
+    carries_quaternion: ClassVar[bool] = True
+    stabilization: float = eqx.field(static=True, default=0.0)
+
+    def from_state(self, scene, state):
+        return self.project(state, scene)
+
+    def kinematics(self, scene, y):
+        return Kinematics(quat.normalize(y.q), omega_from_rate(y.q, y.qdot), y.x, y.v)
+
+    def vector_field(self, t, y, scene):
+        q, qd = y.q, y.qdot
+        n2 = jnp.dot(q, q)
+        omega = 2.0 * quat.multiply(quat.conjugate(q), qd)[1:] / n2
+        kin = Kinematics(q / jnp.sqrt(n2), omega, y.x, y.v)
+        force, torque = scene.wrench(t, kin)
+        omega_dot = scene.omega_dot(omega, torque)
+        qdd = 0.5 * quat.multiply(q, _pure(omega_dot)) - jnp.dot(qd, qd) * q
+        if self.stabilization:
+            k = self.stabilization * jnp.sqrt(jnp.dot(omega, omega))
+            c = jnp.dot(q, qd)
+            e = n2 - 1.0
+            qdd = qdd - ((2.0 * k * c + 0.5 * k * k * e) / n2) * q
+        xd, vd = _translation_rates(scene, y.v, force)
+        return State(qd, qdd, xd, vd)
+
+    def project(self, y, scene):
+        q = quat.normalize(y.q)
+        qdot = quat.derivative(q, omega_from_rate(y.q, y.qdot))
+        return State(q, qdot, y.x, y.v)
+
+    def raw_quaternion(self, y):
+        return y.q
+
+    def tangent_error(self, y):
+        return jnp.sum(y.q * y.qdot, axis=-1)
+
+
+class QuaternionOmegaState(eqx.Module):
+    """Variables of :class:`QuaternionOmega`: ``q (4,)``, ``omega (3,)``, ``x, v``."""
+
+    q: jax.Array
+    omega: jax.Array
+    x: jax.Array | None = None
+    v: jax.Array | None = None
+
+
+class QuaternionOmega(AbstractFormulation):
+    """First-order state ``(q, ω)``: ``q̇ = ½ q ⊗ (0, ω)`` (17.44), ω̇ from (17.34/17.35)."""
+
+    name: ClassVar[str] = "quaternion_omega"
+    carries_quaternion: ClassVar[bool] = True
+
+    def from_state(self, scene, state):
+        return QuaternionOmegaState(state.q, state.omega, state.x, state.v)
+
+    def kinematics(self, scene, y):
+        return Kinematics(quat.normalize(y.q), y.omega, y.x, y.v)
+
+    def vector_field(self, t, y, scene):
+        kin = Kinematics(quat.normalize(y.q), y.omega, y.x, y.v)
+        force, torque = scene.wrench(t, kin)
+        qd = 0.5 * quat.multiply(y.q, _pure(y.omega))
+        xd, vd = _translation_rates(scene, y.v, force)
+        return QuaternionOmegaState(qd, scene.omega_dot(y.omega, torque), xd, vd)
+
+    def project(self, y, scene):
+        return QuaternionOmegaState(quat.normalize(y.q), y.omega, y.x, y.v)
+
+    def raw_quaternion(self, y):
+        return y.q
+
+
+class BodyOmega(AbstractFormulation):
+    """Body-frame ``ω`` alone, Euler's equations (17.35): the chapter's body-frame solution.
+
+    Carries no orientation (Problem 17.3: "we do not know the location of the xyz-axis
+    system"), so it accepts only scenes without translation and without loads that
+    depend on the orientation (gravity about a pivot, space-frame torques). A body-frame
+    :class:`~jrigid.scene.Torque` receives ``kin.q = None``.
+    """
+
+    name: ClassVar[str] = "body_omega"
+    has_orientation: ClassVar[bool] = False
+
+    def check_scene(self, scene):
+        if scene.translates:
+            raise ValueError("body_omega cannot represent free flight; use quaternion_acceleration")
+        if scene.needs_orientation:
+            raise ValueError(
+                "body_omega carries no orientation, but a load of this scene depends on it "
+                "(gravity about a pivot or a space-frame torque); use quaternion_acceleration"
+            )
+
+    def from_state(self, scene, state):
+        return state.omega
+
+    def kinematics(self, scene, y):
+        return Kinematics(None, y)
+
+    def vector_field(self, t, y, scene):
+        _, torque = scene.wrench(t, Kinematics(None, y))
+        return scene.omega_dot(y, torque)
+
+
+class EulerState(eqx.Module):
+    """Variables of :class:`EulerAngles`: ``angles (3,) = (φ, θ, ψ)`` ZXZ, ``omega (3,)``."""
+
+    angles: jax.Array
+    omega: jax.Array
+    x: jax.Array | None = None
+    v: jax.Array | None = None
+
+
+class EulerAngles(AbstractFormulation):
+    """ZXZ Euler angles ``(φ, θ, ψ)`` with rates from (17.36) and ω̇ from (17.35).
+
+    Singular at ``sin θ = 0`` (gimbal lock): the solve terminates when
+    ``|sin θ| < min_sin_theta`` and :func:`jrigid.simulate` reports it (error, or
+    ``Result.gimbal_lock`` with ``throw=False``). Use a quaternion formulation there.
+
+    Attributes:
+        min_sin_theta: static threshold on ``|sin θ|``; default ``1e-3``.
+    """
+
+    name: ClassVar[str] = "euler_angles"
+    min_sin_theta: float = eqx.field(static=True, default=1e-3)
+
+    def from_state(self, scene, state):
+        return EulerState(quat.to_euler("ZXZ", state.q), state.omega, state.x, state.v)
+
+    def kinematics(self, scene, y):
+        return Kinematics(quat.from_euler("ZXZ", y.angles), y.omega, y.x, y.v)
+
+    def angle_rates(self, angles: jax.Array, omega: jax.Array) -> jax.Array:
+        """``(φ̇, θ̇, ψ̇)`` from the body ω, inverting (17.36) (guarded near ``sin θ = 0``)."""
+        th, ps = angles[1], angles[2]
+        st, ct, sp, cp = jnp.sin(th), jnp.cos(th), jnp.sin(ps), jnp.cos(ps)
+        floor = 0.5 * self.min_sin_theta
+        st = jnp.where(jnp.abs(st) < floor, jnp.where(st < 0, -floor, floor), st)
+        dphi = (omega[0] * sp + omega[1] * cp) / st
+        dtheta = omega[0] * cp - omega[1] * sp
+        dpsi = omega[2] - dphi * ct
+        return jnp.stack([dphi, dtheta, dpsi])
+
+    def vector_field(self, t, y, scene):
+        q = quat.from_euler("ZXZ", y.angles) if (scene.needs_orientation) else None
+        kin = Kinematics(q, y.omega, y.x, y.v)
+        force, torque = scene.wrench(t, kin)
+        xd, vd = _translation_rates(scene, y.v, force)
+        return EulerState(
+            self.angle_rates(y.angles, y.omega), scene.omega_dot(y.omega, torque), xd, vd
+        )
+
+    def locked(self, y) -> jax.Array:
+        """Whether ``|sin θ| < min_sin_theta`` (boolean, any batch shape)."""
+        return jnp.abs(jnp.sin(y.angles[..., 1])) < self.min_sin_theta
+
+    def domain_error(self, scene, state):
+        return (
+            self.locked(self.from_state(scene, state)),
+            "the initial orientation is at Euler-angle gimbal lock (|sin θ| < min_sin_theta); "
+            "use formulation='quaternion_acceleration'",
+        )
+
+    def event(self):
+        # Terminate when |sin θ| is small, or when sin θ changes sign within a step
+        # (a step may jump across the singular line when the rates happen to stay finite).
+        return diffrax.Event(
+            (
+                lambda t, y, args, **kwargs: self.locked(y),
+                lambda t, y, args, **kwargs: jnp.sin(y.angles[1]),
+            )
+        )
+
+
+FORMULATIONS = {
+    cls.name: cls for cls in (QuaternionAcceleration, QuaternionOmega, BodyOmega, EulerAngles)
+}
+
+
+def get_formulation(formulation: str | AbstractFormulation) -> AbstractFormulation:
+    """A formulation from its name (see :data:`FORMULATIONS`) or the object itself."""
+    if isinstance(formulation, AbstractFormulation):
+        return formulation
+    try:
+        return FORMULATIONS[formulation]()
+    except (KeyError, TypeError):
+        raise ValueError(
+            f"unknown formulation {formulation!r}; choose one of {sorted(FORMULATIONS)} "
+            "or pass a formulation object"
+        ) from None

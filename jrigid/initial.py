@@ -1,0 +1,286 @@
+"""Initial-condition helpers: build a :class:`~jrigid.state.State` from physical data.
+
+- :func:`from_omega` — an orientation and a body- or space-frame angular velocity;
+- :func:`from_euler_rates` — ZXZ Euler angles ``(φ, θ, ψ)`` and their rates (eq. 17.36),
+  the natural description of a top;
+- :func:`from_momentum_energy` — a space-frame angular momentum and a kinetic energy
+  (picks a point of the polhode);
+- :func:`tilted` — spin about a principal axis tilted by a small angle, for stability
+  studies (Problem 17.3).
+
+Every helper returns ``x, v`` only when given them (free-flight scenes need both).
+Concrete bad input raises ``ValueError``; inside a JAX transformation the same
+conditions are checked with ``equinox.error_if``.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jax.typing import ArrayLike
+
+from jrigid import quaternion as quat
+from jrigid.scene import Scene
+from jrigid.state import State
+
+__all__ = ["from_euler_rates", "from_momentum_energy", "from_omega", "tilted"]
+
+
+def _float(x: ArrayLike) -> jax.Array:
+    """A strongly typed float array (weak types would change the compiled signature)."""
+    x = jnp.asarray(x)
+    dtype = x.dtype if jnp.issubdtype(x.dtype, jnp.floating) else jnp.result_type(float)
+    return jnp.asarray(x, dtype=jax.dtypes.canonicalize_dtype(dtype))
+
+
+def _traced(*xs) -> bool:
+    return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(xs))
+
+
+def _fail(x: jax.Array, bad: jax.Array, message: str) -> jax.Array:
+    """Raise ``ValueError(message)`` if ``bad`` (concrete) or defer to ``eqx.error_if``."""
+    if _traced(x, bad):
+        return eqx.error_if(x, bad, message)
+    if bool(jnp.any(bad)):
+        raise ValueError(message)
+    return x
+
+
+def unit_quaternion(q: ArrayLike, name: str = "q") -> jax.Array:
+    """Validate and normalise an orientation quaternion.
+
+    Args:
+        q: ``(..., 4)`` quaternion, any non-zero norm.
+        name: name used in error messages.
+
+    Returns:
+        ``(..., 4)`` unit quaternion.
+
+    Raises:
+        ValueError: wrong shape, non-finite entries, or (near) zero norm.
+    """
+    q = _float(q)
+    if q.shape[-1:] != (4,):
+        raise ValueError(f"{name} must have shape (..., 4), got {q.shape}")
+    n = jnp.sqrt(jnp.sum(q * q, axis=-1))
+    q = _fail(q, ~jnp.isfinite(q), f"{name} has non-finite entries (NaN or inf)")
+    tiny = jnp.sqrt(jnp.finfo(q.dtype).tiny)
+    q = _fail(q, n <= tiny, f"{name} is the zero quaternion: it represents no rotation")
+    return q / jnp.maximum(n, tiny)[..., None]
+
+
+def _vector(x: ArrayLike, name: str) -> jax.Array:
+    x = _float(x)
+    if x.shape[-1:] != (3,):
+        raise ValueError(f"{name} must have shape (..., 3), got {x.shape}")
+    return _fail(x, ~jnp.isfinite(x), f"{name} has non-finite entries (NaN or inf)")
+
+
+def _translation(x, v):
+    if (x is None) != (v is None):
+        raise ValueError("give both x and v (free flight) or neither")
+    if x is None:
+        return None, None
+    return _vector(x, "x"), _vector(v, "v")
+
+
+def from_omega(
+    q0: ArrayLike | None = None,
+    omega: ArrayLike = (0.0, 0.0, 0.0),
+    *,
+    frame: str = "body",
+    x: ArrayLike | None = None,
+    v: ArrayLike | None = None,
+) -> State:
+    """State from an orientation and an angular velocity, ``q̇ = ½ q ⊗ (0, ω)`` (17.44).
+
+    Args:
+        q0: ``(4,)`` orientation (principal body frame → space); normalised. Default
+            identity.
+        omega: ``(3,)`` angular velocity.
+        frame: ``"body"`` (default) or ``"space"``, the frame ``omega`` is given in.
+        x, v: ``(3,)`` centre-of-mass position and velocity, for free flight only.
+
+    Returns:
+        :class:`~jrigid.state.State`.
+    """
+    omega = _vector(omega, "omega")
+    q0 = quat.identity(dtype=omega.dtype) if q0 is None else unit_quaternion(q0, "q0")
+    if frame == "space":
+        omega = quat.rotate_inverse(q0, omega)
+    elif frame != "body":
+        raise ValueError(f"frame must be 'body' or 'space', got {frame!r}")
+    x, v = _translation(x, v)
+    return State(q0, quat.derivative(q0, omega), x, v)
+
+
+def euler_rates_to_omega(angles: ArrayLike, rates: ArrayLike) -> jax.Array:
+    """Body angular velocity from ZXZ Euler angles and their rates (eq. 17.36).
+
+    ``ω = φ̇ (sθ sψ, sθ cψ, cθ) + θ̇ (cψ, −sψ, 0) + ψ̇ (0, 0, 1)`` for the rotation
+    ``quaternion.from_euler("ZXZ", (φ, θ, ψ))``.
+
+    Args:
+        angles: ``(..., 3)`` ``(φ, θ, ψ)``.
+        rates: ``(..., 3)`` ``(φ̇, θ̇, ψ̇)``.
+
+    Returns:
+        ``(..., 3)`` body angular velocity.
+    """
+    angles, rates = _float(angles), _float(rates)
+    _, th, ps = angles[..., 0], angles[..., 1], angles[..., 2]
+    dph, dth, dps = rates[..., 0], rates[..., 1], rates[..., 2]
+    st, ct, sp, cp = jnp.sin(th), jnp.cos(th), jnp.sin(ps), jnp.cos(ps)
+    return jnp.stack(
+        [dph * st * sp + dth * cp, dph * st * cp - dth * sp, dph * ct + dps], axis=-1
+    )
+
+
+def from_euler_rates(
+    angles: ArrayLike,
+    rates: ArrayLike,
+    *,
+    x: ArrayLike | None = None,
+    v: ArrayLike | None = None,
+) -> State:
+    """State from ZXZ Euler angles (precession φ, nutation θ, spin ψ) and their rates.
+
+    For a symmetric top with its axis along body 3 and gravity along ``−z``, ``θ`` is
+    the tilt of the axis from the vertical, ``φ̇`` the precession rate and
+    ``ω3 = ψ̇ + φ̇ cos θ`` the spin.
+
+    Args:
+        angles: ``(3,)`` ``(φ, θ, ψ)`` in radians (scipy ``"ZXZ"``).
+        rates: ``(3,)`` ``(φ̇, θ̇, ψ̇)``.
+        x, v: ``(3,)`` centre-of-mass position and velocity, for free flight only.
+
+    Returns:
+        :class:`~jrigid.state.State`.
+    """
+    angles, rates = _vector(angles, "angles"), _vector(rates, "rates")
+    q0 = quat.from_euler("ZXZ", angles)
+    return from_omega(q0, euler_rates_to_omega(angles, rates), x=x, v=v)
+
+
+def _shortest_arc(a: jax.Array, b: jax.Array) -> jax.Array:
+    """Unit quaternion rotating unit vector ``a`` onto unit vector ``b`` (minimal angle)."""
+    c = jnp.dot(a, b)
+    axis = jnp.cross(a, b)
+    # Antiparallel: rotate by π about any axis normal to a.
+    trial = jnp.where(jnp.abs(a[0]) < 0.9, jnp.array([1.0, 0.0, 0.0]), jnp.array([0.0, 1.0, 0.0]))
+    normal = jnp.cross(a, trial.astype(a.dtype))
+    anti = c < -1.0 + 1e3 * jnp.finfo(a.dtype).eps
+    q = jnp.where(
+        anti,
+        jnp.concatenate([jnp.zeros(1, a.dtype), normal]),
+        jnp.concatenate([(1.0 + c)[None], axis]),
+    )
+    return q / jnp.linalg.norm(q)
+
+
+def from_momentum_energy(
+    scene: Scene,
+    momentum: ArrayLike,
+    energy: ArrayLike,
+    *,
+    x: ArrayLike | None = None,
+    v: ArrayLike | None = None,
+) -> State:
+    """State with a given space-frame angular momentum and rotational kinetic energy.
+
+    For a torque-free body ``L`` and ``T = ½ ω·Iω`` fix the polhode; this helper picks
+    its point where the body-frame ``L`` has no component along the axis of
+    intermediate moment, solving ``L_a² + L_c² = |L|²``, ``L_a²/I_a + L_c²/I_c = 2T``
+    for the smallest and largest moments (``L_a, L_c ≥ 0``), and orients the body so
+    that ``q ⊗ L_body ⊗ q* = momentum`` (shortest arc).
+
+    Args:
+        scene: the scene (its inertia about the rotation centre is used; principal).
+        momentum: ``(3,)`` angular momentum in the space frame, non-zero.
+        energy: ``()`` rotational kinetic energy, with
+            ``|L|²/(2 I_max) ≤ T ≤ |L|²/(2 I_min)``.
+        x, v: ``(3,)`` centre-of-mass position and velocity, for free flight only.
+
+    Returns:
+        :class:`~jrigid.state.State`.
+
+    Raises:
+        ValueError: energy outside the admissible range, zero momentum, or a pivoted
+            scene whose centre of mass is off the principal axes (non-diagonal inertia).
+    """
+    momentum = _vector(momentum, "momentum")
+    energy = _float(energy)
+    if momentum.shape != (3,) or energy.shape != ():
+        raise ValueError("from_momentum_energy expects momentum (3,) and a scalar energy")
+    tensor = scene.inertia()
+    moments = jnp.diagonal(tensor)
+    off = jnp.max(jnp.abs(tensor - jnp.diag(moments)))
+    l2 = jnp.dot(momentum, momentum)
+    order = jnp.argsort(moments)
+    i_lo, i_hi = moments[order[0]], moments[order[2]]
+    two_t = 2.0 * energy
+    lo, hi = l2 / i_hi, l2 / i_lo
+    slack = 1e-12 * hi
+    two_t = _fail(
+        two_t,
+        off > 1e-12 * jnp.max(moments),
+        "from_momentum_energy: inertia about the rotation centre is not diagonal",
+    )
+    two_t = _fail(two_t, l2 <= 0, "from_momentum_energy: momentum must be non-zero")
+    two_t = _fail(
+        two_t,
+        (two_t < lo - slack) | (two_t > hi + slack),
+        "from_momentum_energy: energy is outside [|L|²/(2 I_max), |L|²/(2 I_min)] "
+        "for this momentum",
+    )
+    # Solve the 2x2 linear system for (L_lo², L_hi²); degenerate when I_lo == I_hi.
+    denom = 1.0 / i_lo - 1.0 / i_hi
+    safe = jnp.where(denom > 0, denom, 1.0)
+    a2 = jnp.where(denom > 0, (two_t - l2 / i_hi) / safe, l2)
+    a2 = jnp.clip(a2, 0.0, l2)
+    c2 = l2 - a2
+    body_l = jnp.zeros(3, dtype=momentum.dtype)
+    body_l = body_l.at[order[0]].set(jnp.sqrt(a2)).at[order[2]].set(jnp.sqrt(c2))
+    norm = jnp.sqrt(l2)
+    q0 = _shortest_arc(body_l / norm, momentum / norm)
+    return from_omega(q0, body_l / moments, x=x, v=v)
+
+
+def tilted(
+    axis: int,
+    angle: ArrayLike,
+    rate: ArrayLike,
+    *,
+    toward: int | None = None,
+    q0: ArrayLike | None = None,
+    x: ArrayLike | None = None,
+    v: ArrayLike | None = None,
+) -> State:
+    """Spin of magnitude ``rate`` about principal ``axis`` tilted by ``angle`` toward another.
+
+    ``ω_body = rate (cos(angle) e_axis + sin(angle) e_toward)``: the classic perturbed
+    spin of a stability study (stable about the axes of largest and smallest moment,
+    unstable about the intermediate one, Problem 17.3).
+
+    Args:
+        axis: static principal axis index ``0, 1, 2`` (body axes 1, 2, 3).
+        angle: ``()`` tilt in radians.
+        rate: ``()`` angular speed ``|ω|``.
+        toward: static axis the tilt leans toward; default ``(axis + 1) % 3``.
+        q0: ``(4,)`` orientation; default identity.
+        x, v: ``(3,)`` centre-of-mass position and velocity, for free flight only.
+
+    Returns:
+        :class:`~jrigid.state.State`.
+    """
+    if axis not in (0, 1, 2):
+        raise ValueError(f"axis must be 0, 1 or 2, got {axis!r}")
+    toward = (axis + 1) % 3 if toward is None else toward
+    if toward not in (0, 1, 2) or toward == axis:
+        raise ValueError(f"toward must be an axis index other than {axis}, got {toward!r}")
+    angle, rate = _float(angle), _float(rate)
+    dtype = jnp.result_type(angle, rate)
+    omega = jnp.zeros(3, dtype=dtype)
+    omega = omega.at[axis].set(rate * jnp.cos(angle)).at[toward].set(rate * jnp.sin(angle))
+    return from_omega(q0, omega, x=x, v=v)

@@ -1,0 +1,318 @@
+"""Scenes: a body, how it is held, and what acts on it.
+
+"Model only what a scene needs": a :class:`Scene` names one :class:`~jrigid.body.RigidBody`,
+a holder
+
+- :class:`FreeRotation` — the body turns about its centre of mass, which stays put;
+- :class:`Pivot` — a fixed frictionless pivot at the body's support point (heavy top,
+  gyroscope). The centre of mass sits at ``body.com`` from the pivot, and the dynamics
+  use the inertia about the pivot, ``diag(moments) + M (|r|² 1 − r rᵀ)`` with
+  ``r = body.com`` (parallel-axis theorem): ``body.moments`` are always central moments;
+- :class:`FreeFlight` — the centre of mass translates (``x, v`` join the state) and the
+  body turns about it;
+
+and a tuple of loads: :class:`Gravity` (uniform field) and :class:`Torque` (a user
+function ``N(t, kin, params)`` in the body or space frame). Every part is an
+``equinox.Module``, so scenes are pytrees: ``jit``, ``vmap`` and ``grad`` reach the
+moments, mass, lever arm, field strength and torque parameters alike.
+
+All methods here act on one (unbatched) state; batch with ``jax.vmap``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, ClassVar
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from jrigid import quaternion as quat
+from jrigid.body import RigidBody
+from jrigid.state import Kinematics
+
+__all__ = [
+    "AbstractHolder",
+    "AbstractLoad",
+    "FreeFlight",
+    "FreeRotation",
+    "Gravity",
+    "Pivot",
+    "Scene",
+    "Torque",
+]
+
+
+def _solve3(a: jax.Array, b: jax.Array) -> jax.Array:
+    """``a⁻¹ b`` for one ``(3, 3)`` matrix by the adjugate (cheap and differentiable)."""
+    c0 = _cross(a[:, 1], a[:, 2])
+    c1 = _cross(a[:, 2], a[:, 0])
+    c2 = _cross(a[:, 0], a[:, 1])
+    det = jnp.dot(a[:, 0], c0)
+    return jnp.stack([jnp.dot(c0, b), jnp.dot(c1, b), jnp.dot(c2, b)]) / det
+
+
+def _cross(a: jax.Array, b: jax.Array) -> jax.Array:
+    return jnp.stack(
+        [
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        ]
+    )
+
+
+# --------------------------------------------------------------------------- holders
+
+
+class AbstractHolder(eqx.Module):
+    """How a body is held. Subclasses set ``translates`` and ``pivoted``."""
+
+    translates: ClassVar[bool] = False
+    pivoted: ClassVar[bool] = False
+
+
+class FreeRotation(AbstractHolder):
+    """Rotation about the centre of mass, which stays fixed (``body.com`` is ignored)."""
+
+
+class Pivot(AbstractHolder):
+    """A fixed frictionless pivot at the support point; the centre of mass is at ``body.com``.
+
+    The dynamics use the inertia about the pivot (parallel-axis shift of the central
+    moments); gravity exerts the torque ``r × M g`` about it, computed in the body frame.
+    """
+
+    pivoted: ClassVar[bool] = True
+
+
+class FreeFlight(AbstractHolder):
+    """Free flight: the centre of mass moves (state gains ``x, v``); rotation about it."""
+
+    translates: ClassVar[bool] = True
+
+
+# --------------------------------------------------------------------------- loads
+
+
+class AbstractLoad(eqx.Module):
+    """Something acting on the body.
+
+    Subclasses implement :meth:`wrench` and may implement :meth:`potential` and
+    :meth:`uses_orientation` (formulations without an orientation, such as
+    ``body_omega``, reject loads that use it).
+    """
+
+    def wrench(self, t, kin: Kinematics, scene: Scene) -> tuple[jax.Array, jax.Array]:
+        """``(force (3,), space frame; torque (3,) about the rotation centre, body frame)``."""
+        raise NotImplementedError
+
+    def potential(self, kin: Kinematics, scene: Scene) -> jax.Array:
+        """Potential energy ``()``; zero unless the load is conservative."""
+        return jnp.zeros((), dtype=kin.omega.dtype)
+
+    def uses_orientation(self, scene: Scene) -> bool:
+        """Whether this load needs the orientation in ``scene`` (static); default yes."""
+        return True
+
+
+def _gravity_vector(g) -> jax.Array:
+    g = jnp.asarray(g)
+    dtype = g.dtype if jnp.issubdtype(g.dtype, jnp.floating) else jnp.result_type(float)
+    g = jnp.asarray(g, dtype=jax.dtypes.canonicalize_dtype(dtype))
+    if g.ndim == 0:
+        zero = jnp.zeros_like(g)
+        return jnp.stack([zero, zero, -g])
+    return g
+
+
+class Gravity(AbstractLoad):
+    """Uniform gravity.
+
+    Attributes:
+        g: ``(3,)`` gravitational acceleration in the space frame; a scalar ``g`` means
+            ``(0, 0, −g)``. Default ``9.81`` (the chapter's gyroscope uses ``g = 1``).
+
+    For a :class:`Pivot` scene the torque about the pivot is ``r × (M g_body)`` with
+    ``g_body = q* ⊗ g ⊗ q`` (the field projected into the body frame) and ``r = body.com``;
+    the potential energy is ``−M g · (R r)``. For :class:`FreeFlight` the force ``M g``
+    acts on the centre of mass (potential ``−M g · x``) and there is no torque. For
+    :class:`FreeRotation` gravity does nothing (the support carries the weight).
+    """
+
+    g: jax.Array = eqx.field(converter=_gravity_vector, default=9.81)
+
+    def uses_orientation(self, scene: Scene) -> bool:
+        return scene.holder.pivoted
+
+    def wrench(self, t, kin, scene):
+        m = scene.body.mass
+        zero = jnp.zeros(3, dtype=kin.omega.dtype)
+        if scene.holder.pivoted:
+            g_body = quat.rotate_inverse(kin.q, self.g)
+            return zero, _cross(scene.body.com, m * g_body)
+        if scene.holder.translates:
+            return m * self.g, zero
+        return zero, zero
+
+    def potential(self, kin, scene):
+        m = scene.body.mass
+        if scene.holder.pivoted:
+            return -m * jnp.dot(self.g, quat.rotate(kin.q, scene.body.com))
+        if scene.holder.translates:
+            return -m * jnp.dot(self.g, kin.x)
+        return jnp.zeros((), dtype=kin.omega.dtype)
+
+
+def _float_leaves(params):
+    """Python floats → arrays, so that changing them does not recompile."""
+    return jax.tree_util.tree_map(
+        lambda x: jnp.asarray(x, dtype=jnp.result_type(float)) if isinstance(x, float) else x,
+        params,
+    )
+
+
+class Torque(AbstractLoad):
+    """A user torque ``N = fn(t, kin, params)``.
+
+    Attributes:
+        fn: static callable ``(t, kin: Kinematics, params) -> (3,)`` torque about the
+            rotation centre (pivot or centre of mass). Keep the same function object
+            between calls: it is part of the compiled program's identity.
+        params: pytree of parameters (traced: ``grad`` and ``vmap`` reach them; Python
+            floats are converted to arrays, other non-array leaves stay static).
+        frame: static, ``"body"`` or ``"space"``, the frame ``fn`` returns its torque
+            in. A space-frame torque is projected into the body frame with ``q``.
+
+    Under the ``body_omega`` formulation only body-frame torques are allowed and
+    ``kin.q`` is ``None``.
+    """
+
+    fn: Callable[..., Any] = eqx.field(static=True)
+    params: Any = eqx.field(default=None, converter=_float_leaves)
+    frame: str = eqx.field(static=True, default="body")
+
+    def __check_init__(self):
+        if self.frame not in ("body", "space"):
+            raise ValueError(f"Torque frame must be 'body' or 'space', got {self.frame!r}")
+        if not callable(self.fn):
+            raise ValueError("Torque fn must be callable as fn(t, kin, params)")
+
+    def uses_orientation(self, scene: Scene) -> bool:
+        return self.frame == "space"
+
+    def wrench(self, t, kin, scene):
+        n = jnp.asarray(self.fn(t, kin, self.params), dtype=kin.omega.dtype)
+        if n.shape != (3,):
+            raise ValueError(f"Torque fn must return shape (3,), got {n.shape}")
+        if self.frame == "space":
+            n = quat.rotate_inverse(kin.q, n)
+        return jnp.zeros(3, dtype=kin.omega.dtype), n
+
+
+# --------------------------------------------------------------------------- scene
+
+
+def _as_loads(loads) -> tuple:
+    if isinstance(loads, AbstractLoad):
+        return (loads,)
+    return tuple(loads)
+
+
+class Scene(eqx.Module):
+    """One body, how it is held, and what acts on it.
+
+    Attributes:
+        body: the :class:`~jrigid.body.RigidBody`.
+        holder: :class:`FreeRotation` (default), :class:`Pivot` or :class:`FreeFlight`.
+        loads: tuple of loads (:class:`Gravity`, :class:`Torque`); default none.
+
+    The state of a scene is ``(q, q̇)``, plus ``(x, v)`` when ``holder`` is
+    :class:`FreeFlight` (see :class:`jrigid.state.State`).
+    """
+
+    body: RigidBody
+    holder: AbstractHolder = FreeRotation()
+    loads: tuple = eqx.field(default=(), converter=_as_loads)
+
+    def __check_init__(self):
+        if not isinstance(self.body, RigidBody):
+            raise ValueError(f"Scene body must be a RigidBody, got {type(self.body).__name__}")
+        if not isinstance(self.holder, AbstractHolder):
+            raise ValueError(
+                "Scene holder must be FreeRotation(), Pivot() or FreeFlight(), "
+                f"got {self.holder!r}"
+            )
+        for load in self.loads:
+            if not isinstance(load, AbstractLoad):
+                raise ValueError(f"Scene loads must be Gravity or Torque, got {load!r}")
+
+    @property
+    def translates(self) -> bool:
+        """Whether the state carries ``x, v`` (static)."""
+        return self.holder.translates
+
+    @property
+    def needs_orientation(self) -> bool:
+        """Whether some load depends on the orientation (static)."""
+        return any(load.uses_orientation(self) for load in self.loads)
+
+    def lever(self) -> jax.Array:
+        """``(3,)`` centre of mass relative to the rotation centre, body frame."""
+        if self.holder.pivoted:
+            return self.body.com
+        return jnp.zeros_like(self.body.com)
+
+    def inertia(self) -> jax.Array:
+        """``(3, 3)`` inertia about the rotation centre in the body frame (parallel axis)."""
+        tensor = self.body.tensor()
+        if self.holder.pivoted:
+            r = self.body.com
+            eye = jnp.eye(3, dtype=r.dtype)
+            tensor = tensor + self.body.mass * (jnp.dot(r, r) * eye - jnp.outer(r, r))
+        return tensor
+
+    def omega_dot(self, omega: jax.Array, torque: jax.Array) -> jax.Array:
+        """Euler's equations ``I ω̇ = N − ω × (I ω)`` (eq. 17.34; 17.35 for diagonal ``I``).
+
+        Args:
+            omega: ``(3,)`` body angular velocity.
+            torque: ``(3,)`` body-frame torque about the rotation centre.
+
+        Returns:
+            ``(3,)`` body angular acceleration.
+        """
+        if self.holder.pivoted:
+            tensor = self.inertia()
+            return _solve3(tensor, torque - _cross(omega, tensor @ omega))
+        moments = self.body.moments
+        return (torque - _cross(omega, moments * omega)) / moments
+
+    def wrench(self, t, kin: Kinematics) -> tuple[jax.Array, jax.Array]:
+        """Total ``(force (3,) space frame, torque (3,) body frame)`` of all loads."""
+        force = jnp.zeros(3, dtype=kin.omega.dtype)
+        torque = jnp.zeros(3, dtype=kin.omega.dtype)
+        for load in self.loads:
+            f, n = load.wrench(t, kin, self)
+            force = force + f
+            torque = torque + n
+        return force, torque
+
+    def angular_momentum(self, omega: jax.Array) -> jax.Array:
+        """``(3,)`` body-frame angular momentum ``L = I ω`` about the rotation centre (17.30b)."""
+        return self.inertia() @ omega
+
+    def kinetic_energy(self, omega: jax.Array, v: jax.Array | None = None) -> jax.Array:
+        """``½ ω·Iω`` (+ ``½ M |v|²`` in free flight)."""
+        energy = 0.5 * jnp.dot(omega, self.inertia() @ omega)
+        if v is not None:
+            energy = energy + 0.5 * self.body.mass * jnp.dot(v, v)
+        return energy
+
+    def potential_energy(self, kin: Kinematics) -> jax.Array:
+        """Total potential energy ``()`` of the conservative loads."""
+        energy = jnp.zeros((), dtype=kin.omega.dtype)
+        for load in self.loads:
+            energy = energy + load.potential(kin, self)
+        return energy

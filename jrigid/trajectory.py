@@ -1,0 +1,147 @@
+"""The :class:`Trajectory` pytree returned by :func:`jrigid.simulate` and the leapfrog."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from jrigid import quaternion as quat
+from jrigid.formulations import AbstractFormulation
+from jrigid.scene import Scene
+
+__all__ = ["Trajectory"]
+
+
+def _derived(scene: Scene, formulation: AbstractFormulation, y) -> dict[str, Any]:
+    """Physical quantities at one (unbatched) state."""
+    kin = formulation.kinematics(scene, y)
+    out = dict(omega=kin.omega, x=kin.x, v=kin.v)
+    out["L"] = scene.angular_momentum(kin.omega)
+    out["kinetic_energy"] = scene.kinetic_energy(kin.omega, kin.v)
+    if kin.q is None:
+        out.update(q=None, omega_space=None, L_space=None, axes=None)
+        out["potential_energy"] = jnp.zeros((), kin.omega.dtype)
+    else:
+        out["q"] = kin.q
+        out["omega_space"] = quat.rotate(kin.q, kin.omega)
+        out["L_space"] = quat.rotate(kin.q, out["L"])
+        out["axes"] = quat.to_matrix(kin.q)
+        out["potential_energy"] = scene.potential_energy(kin)
+    raw = formulation.raw_quaternion(y)
+    out["norm_error"] = None if raw is None else jnp.sqrt(jnp.dot(raw, raw)) - 1.0
+    out["tangent_error"] = formulation.tangent_error(y)
+    return out
+
+
+class Trajectory(eqx.Module):
+    """A solved motion sampled at times ``ts`` (all arrays have leading axis ``T``).
+
+    Attributes:
+        ts: ``(T,)`` times.
+        y: the formulation's own state at ``ts`` (pytree, leading axis ``T``).
+        q: ``(T, 4)`` unit orientation (principal body frame → space), or ``None``
+            (``body_omega``).
+        omega: ``(T, 3)`` body angular velocity.
+        omega_space: ``(T, 3)`` space angular velocity (or ``None``).
+        L: ``(T, 3)`` body-frame angular momentum about the rotation centre (pivot or
+            centre of mass).
+        L_space: ``(T, 3)`` space-frame angular momentum (or ``None``).
+        kinetic_energy: ``(T,)`` rotational (+ translational) kinetic energy.
+        potential_energy: ``(T,)`` potential energy of the conservative loads.
+        norm_error: ``(T,)`` ``|q| − 1`` of the integrated quaternion (``None`` when ``q``
+            is not a variable).
+        tangent_error: ``(T,)`` ``q·q̇`` (``quaternion_acceleration`` only, else ``None``).
+        axes: ``(T, 3, 3)`` rotation matrices; column ``i`` is body axis ``i + 1`` in
+            the space frame (or ``None``).
+        x, v: ``(T, 3)`` centre-of-mass position and velocity (free flight), else ``None``.
+        stats: dict with ``num_steps``, ``num_accepted_steps``, ``num_rejected_steps``.
+        result: ``()`` int, a :class:`jrigid.simulate.Result` code (0 = success).
+            Values at times after a failure are ``inf``/``NaN``.
+        t_stop: ``()`` the time the integration reached (``ts[-1]`` on success).
+        scene: the simulated :class:`~jrigid.scene.Scene`.
+        formulation: static, the formulation used.
+        interpolation: dense diffrax interpolation (``simulate(..., dense=True)``) or
+            ``None``; see :meth:`at`.
+    """
+
+    ts: jax.Array
+    y: Any
+    q: jax.Array | None
+    omega: jax.Array
+    omega_space: jax.Array | None
+    L: jax.Array
+    L_space: jax.Array | None
+    kinetic_energy: jax.Array
+    potential_energy: jax.Array
+    norm_error: jax.Array | None
+    tangent_error: jax.Array | None
+    axes: jax.Array | None
+    x: jax.Array | None
+    v: jax.Array | None
+    stats: dict
+    result: jax.Array
+    t_stop: jax.Array
+    scene: Scene
+    formulation: AbstractFormulation = eqx.field(static=True)
+    interpolation: Any = None
+
+    @classmethod
+    def build(
+        cls, scene, formulation, ts, ys, *, stats, result, t_stop, interpolation=None
+    ) -> Trajectory:
+        """Assemble a trajectory from formulation states ``ys`` (leading axis ``T``)."""
+        derived = jax.vmap(lambda y: _derived(scene, formulation, y))(ys)
+        return cls(
+            ts=ts,
+            y=ys,
+            stats=stats,
+            result=result,
+            t_stop=t_stop,
+            scene=scene,
+            formulation=formulation,
+            interpolation=interpolation,
+            **derived,
+        )
+
+    @property
+    def energy(self) -> jax.Array:
+        """``(T,)`` total energy, kinetic plus potential."""
+        return self.kinetic_energy + self.potential_energy
+
+    @property
+    def succeeded(self) -> jax.Array:
+        """``()`` bool, whether the integration reached ``ts[-1]``."""
+        return self.result == 0
+
+    def euler(self, seq: str = "ZXZ") -> jax.Array:
+        """``(T, 3)`` Euler angles of the orientation in sequence ``seq`` (scipy meaning)."""
+        if self.q is None:
+            raise ValueError(f"the {self.formulation.name} formulation carries no orientation")
+        return quat.to_euler(seq, self.q)
+
+    def at(self, t) -> Trajectory:
+        """The trajectory at new times ``t (K,)`` from the dense interpolation.
+
+        Needs ``simulate(..., dense=True)``. The solver statistics are carried over.
+        """
+        if self.interpolation is None:
+            raise ValueError("no dense output: call simulate(..., dense=True)")
+        return _at(self, jnp.atleast_1d(jnp.asarray(t, dtype=self.ts.dtype)))
+
+
+@eqx.filter_jit
+def _at(traj: Trajectory, t: jax.Array) -> Trajectory:
+    ys = jax.vmap(traj.interpolation.evaluate)(t)
+    return Trajectory.build(
+        traj.scene,
+        traj.formulation,
+        t,
+        ys,
+        stats=traj.stats,
+        result=traj.result,
+        t_stop=traj.t_stop,
+        interpolation=traj.interpolation,
+    )

@@ -1,0 +1,443 @@
+"""simulate: solvers, formulations, leapfrog, transformations, free flight, failures."""
+
+import logging
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+from scipy.stats import linregress
+
+from jrigid import initial
+from jrigid.body import RigidBody
+from jrigid.formulations import EulerAngles
+from jrigid.leapfrog import leapfrog
+from jrigid.scene import FreeFlight, Gravity, Pivot, Scene, Torque
+from jrigid.simulate import Result, SimulationError, simulate
+from jrigid.state import State
+
+N_OUT = 201  # shared with test_dynamics_analytic so compiled solves are reused
+MOMENTS = jnp.array([1.0, 2.0, 3.0])
+
+
+def scipy_rot(q):
+    return Rotation.from_quat(np.array(q, dtype=float), scalar_first=True)
+
+
+def same_rotation(q1, q2, atol):
+    sign = np.sign(np.sum(np.asarray(q1) * np.asarray(q2), axis=-1))[..., None]
+    np.testing.assert_allclose(sign * np.asarray(q1), np.asarray(q2), atol=atol)
+
+
+def free_scene():
+    return Scene(RigidBody(MOMENTS))
+
+
+def top_scene():
+    body = RigidBody(jnp.array([0.5, 0.5, 0.8]), com=jnp.array([0.0, 0.0, 1.0]))
+    return Scene(body, Pivot(), Gravity(1.0))
+
+
+# q0 tilts body axis 3 well away from space z so ZXZ Euler angles stay regular.
+Q0 = jnp.array(Rotation.from_euler("ZXZ", [0.2, 1.2, -0.4]).as_quat(scalar_first=True))
+OMEGA0 = jnp.array([0.2, 0.3, 1.5])  # near the stable axis 3: θ stays away from 0 and π
+TS = jnp.linspace(0.0, 10.0, N_OUT)
+
+
+@pytest.fixture(scope="module")
+def free_reference():
+    """Dopri8 at rtol 1e-12; checked against scipy DOP853 in test_dynamics_analytic."""
+    return simulate(free_scene(), initial.from_omega(Q0, OMEGA0), TS,
+                    solver=diffrax.Dopri8(), rtol=1e-12, atol=1e-14)
+
+
+@pytest.fixture(scope="module")
+def top_reference():
+    state = initial.from_euler_rates([0.0, 0.6, 0.0], [0.3, 0.0, 5.0])
+    traj = simulate(top_scene(), state, TS, solver=diffrax.Dopri8(), rtol=1e-12, atol=1e-14)
+    return state, traj
+
+
+# --------------------------------------------------------------------------- solvers
+
+
+@pytest.mark.parametrize(
+    "solver, rtol, tol",
+    [
+        (diffrax.Tsit5(), 1e-9, 1e-7),
+        (diffrax.Dopri5(), 1e-9, 1e-7),
+        (diffrax.Dopri8(), 1e-9, 1e-7),
+        (diffrax.Heun(), 1e-6, 1e-4),
+        (diffrax.Kvaerno5(), 1e-8, 1e-6),
+    ],
+    ids=["Tsit5", "Dopri5", "Dopri8", "Heun", "Kvaerno5"],
+)
+def test_every_solver(free_reference, solver, rtol, tol):
+    traj = simulate(free_scene(), initial.from_omega(Q0, OMEGA0), TS, solver=solver,
+                    rtol=rtol, atol=1e-2 * rtol)
+    assert int(traj.result) == Result.success
+    np.testing.assert_allclose(traj.omega, free_reference.omega, atol=tol)
+    same_rotation(traj.q, free_reference.q, tol)
+    stats = {k: int(v) for k, v in traj.stats.items()}
+    assert stats["num_steps"] == stats["num_accepted_steps"] + stats["num_rejected_steps"]
+    assert stats["num_accepted_steps"] > 0
+
+
+# --------------------------------------------------------------------------- formulations
+
+
+@pytest.mark.parametrize(
+    "formulation", ["quaternion_acceleration", "quaternion_omega", "body_omega", "euler_angles"]
+)
+def test_formulations_agree_free_rotor(free_reference, formulation):
+    traj = simulate(free_scene(), initial.from_omega(Q0, OMEGA0), TS,
+                    formulation=formulation, rtol=1e-10, atol=1e-12)
+    assert int(traj.result) == 0
+    np.testing.assert_allclose(traj.omega, free_reference.omega, atol=1e-8)
+    np.testing.assert_allclose(traj.L, free_reference.L, atol=1e-8)
+    if formulation == "body_omega":
+        assert traj.q is None and traj.L_space is None
+        with pytest.raises(ValueError, match="orientation"):
+            traj.euler("ZXZ")
+    else:
+        same_rotation(traj.q, free_reference.q, 1e-8)
+        np.testing.assert_allclose(traj.L_space, free_reference.L_space, atol=1e-8)
+
+
+@pytest.mark.parametrize("formulation", ["quaternion_acceleration", "quaternion_omega",
+                                         "euler_angles", "leapfrog"])
+def test_formulations_agree_heavy_top(top_reference, formulation):
+    state, ref = top_reference
+    if formulation == "leapfrog":
+        traj, tol = leapfrog(top_scene(), state, TS, dt=1e-3), 1e-4
+    else:
+        traj, tol = simulate(top_scene(), state, TS, formulation=formulation,
+                             rtol=1e-10, atol=1e-12), 1e-7
+    assert int(traj.result) == 0
+    np.testing.assert_allclose(traj.omega, ref.omega, atol=tol)
+    same_rotation(traj.q, ref.q, tol)
+    np.testing.assert_allclose(traj.energy, ref.energy[0], atol=tol)
+
+
+def test_trajectory_quantities_are_consistent(free_reference):
+    traj = free_reference
+    R = scipy_rot(traj.q).as_matrix()
+    np.testing.assert_allclose(traj.axes, R, atol=1e-12)
+    np.testing.assert_allclose(traj.omega_space, np.einsum("tij,tj->ti", R, traj.omega),
+                               atol=1e-12)
+    np.testing.assert_allclose(traj.L, np.asarray(traj.omega) * np.asarray(MOMENTS), atol=1e-12)
+    np.testing.assert_allclose(
+        traj.euler("zyx"), scipy_rot(traj.q).as_euler("zyx"), atol=1e-10
+    )
+    np.testing.assert_allclose(
+        traj.kinetic_energy, 0.5 * np.sum(np.asarray(traj.omega) * np.asarray(traj.L), -1),
+        rtol=1e-12,
+    )
+    assert traj.x is None and traj.v is None
+
+
+# --------------------------------------------------------------------------- leapfrog
+
+
+def _leapfrog_errors(variant, top_reference):
+    state, ref = top_reference
+    ts = TS[:41]  # t ∈ [0, 2]
+    errors, dts = [], []
+    for k in (2, 4, 8, 16):
+        dt = 0.05 / k  # divides the output spacing
+        traj = leapfrog(top_scene(), state, ts, dt=dt, variant=variant)
+        assert int(traj.stats["num_steps"]) == 40 * k
+        errors.append(np.max(np.abs(np.asarray(traj.omega[-1]) - np.asarray(ref.omega[40]))))
+        dts.append(dt)
+    return linregress(np.log(dts), np.log(errors)).slope
+
+
+def test_leapfrog_order_two(top_reference):
+    slope = _leapfrog_errors("midpoint", top_reference)
+    assert 1.9 < slope < 2.1
+
+
+def test_leapfrog_chapter_listing_is_first_order(top_reference):
+    """The listing evaluates q̇ at q(t) instead of q(t + Δt/2): first order."""
+    slope = _leapfrog_errors("chapter", top_reference)
+    assert 0.9 < slope < 1.1
+
+
+def test_leapfrog_renormalises(top_reference):
+    state, _ = top_reference
+    traj = leapfrog(top_scene(), state, TS, dt=0.05)
+    assert np.max(np.abs(np.asarray(traj.norm_error))) < 1e-14
+
+
+# --------------------------------------------------------------------------- transformations
+
+
+@eqx.filter_jit
+def _jitted_final_omega(moments, omega0):
+    scene = Scene(RigidBody(moments))
+    return simulate(scene, initial.from_omega(Q0, omega0), TS, rtol=1e-10, atol=1e-12).omega[-1]
+
+
+def test_jit_matches_eager_and_still_validates(free_reference):
+    np.testing.assert_allclose(
+        _jitted_final_omega(MOMENTS, OMEGA0), free_reference.omega[-1], atol=1e-8
+    )
+    # Inside jit the inputs are checked at run time (equinox.error_if; with plain jax.jit
+    # the same message arrives wrapped in a JaxRuntimeError).
+    with pytest.raises(eqx.EquinoxRuntimeError, match="triangle"):
+        jax.block_until_ready(_jitted_final_omega(jnp.array([1.0, 1.0, 3.0]), OMEGA0))
+    with pytest.raises(eqx.EquinoxRuntimeError, match="zero quaternion|non-finite"):
+        jax.block_until_ready(_jitted_final_omega(MOMENTS, OMEGA0 * jnp.nan))
+
+
+def _batched_run(moments, omegas, throw):
+    def run(m, w):
+        return simulate(Scene(RigidBody(m)), initial.from_omega(Q0, w), TS, rtol=1e-10,
+                        atol=1e-12, throw=throw)
+
+    return jax.vmap(run)(moments, omegas)
+
+
+BATCH_MOMENTS = jnp.array([[1.0, 2.0, 3.0], [1.5, 2.0, 3.0], [2.0, 2.0, 2.5]])
+
+
+def test_vmap_over_states_and_parameters():
+    omegas = jnp.stack([OMEGA0, 2 * OMEGA0, -OMEGA0])
+    batched = _batched_run(BATCH_MOMENTS, omegas, True)
+    assert batched.result.shape == (3,) and batched.q.shape == (3, N_OUT, 4)
+    for i in range(3):
+        single = simulate(Scene(RigidBody(BATCH_MOMENTS[i])), initial.from_omega(Q0, omegas[i]),
+                          TS, rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(batched.omega[i], single.omega, atol=1e-9)
+    # Energy is conserved member by member.
+    expected = 0.5 * jnp.sum(BATCH_MOMENTS * omegas**2, axis=-1)
+    np.testing.assert_allclose(batched.kinetic_energy[:, -1], expected, rtol=1e-8)
+
+
+def test_vmap_failure_flags_per_member():
+    # The last member spins so fast that it needs more than max_steps steps.
+    omegas = jnp.stack([OMEGA0, 2 * OMEGA0, 3e4 * OMEGA0])
+    trajs = _batched_run(BATCH_MOMENTS, omegas, False)
+    np.testing.assert_array_equal(trajs.result, [Result.success, Result.success,
+                                                 Result.max_steps])
+    assert np.all(np.isfinite(np.asarray(trajs.q[:2])))
+    assert np.isnan(np.asarray(trajs.q[2, -1])).all()
+    with pytest.raises(eqx.EquinoxRuntimeError, match="max_steps=100000 exhausted"):
+        jax.block_until_ready(_batched_run(BATCH_MOMENTS, omegas, True).q)
+
+
+GRAD_MOMENTS = jnp.array([1.5, 2.0, 3.0])
+
+
+def _final_quantity(moments, omega0):
+    scene = Scene(RigidBody(moments))
+    traj = simulate(scene, initial.from_omega(Q0, omega0), TS, rtol=1e-12, atol=1e-13)
+    return traj.omega[-1, 0] + traj.q[-1, 1]
+
+
+def test_grad_matches_finite_differences():
+    grad = jax.grad(_final_quantity, argnums=(0, 1))(GRAD_MOMENTS, OMEGA0)
+    h = 1e-5
+    for which, base in ((0, GRAD_MOMENTS), (1, OMEGA0)):
+        for i in range(3):
+            dp = jnp.zeros(3).at[i].set(h)
+            args_p = [GRAD_MOMENTS, OMEGA0]
+            args_m = [GRAD_MOMENTS, OMEGA0]
+            args_p[which] = base + dp
+            args_m[which] = base - dp
+            fd = (_final_quantity(*args_p) - _final_quantity(*args_m)) / (2 * h)
+            np.testing.assert_allclose(grad[which][i], fd, rtol=1e-5, atol=1e-7)
+
+
+def test_tolerance_change_does_not_recompile(caplog):
+    state = initial.from_omega(Q0, OMEGA0)
+    simulate(free_scene(), state, TS, rtol=1e-9)
+    with jax.log_compiles(), caplog.at_level(logging.WARNING):
+        simulate(free_scene(), state, TS, rtol=1e-7, atol=1e-9)
+        simulate(Scene(RigidBody(MOMENTS + 0.5, mass=2.0)), state, TS + 1.0, rtol=1e-6,
+                 dt0=None)
+    assert not [r for r in caplog.records if "Compiling" in r.message and "_solve" in r.message]
+
+
+# --------------------------------------------------------------------------- free flight
+
+
+def test_free_flight_parabola_and_torque_free_rotation():
+    g = jnp.array([0.0, 0.0, -9.81])
+    I1, I3 = 1.0, 1.6
+    body = RigidBody(jnp.array([I1, I1, I3]), mass=2.0)
+    scene = Scene(body, FreeFlight(), Gravity(g))
+    x0, v0 = jnp.array([0.0, 1.0, 2.0]), jnp.array([3.0, 0.0, 10.0])
+    w_perp, w3 = 0.5, 3.0
+    state = initial.from_omega(None, [w_perp, 0.0, w3], x=x0, v=v0)
+    ts = jnp.linspace(0.0, 2.0, 41)
+    traj = simulate(scene, state, ts, rtol=1e-11, atol=1e-12)
+    t = np.asarray(ts)[:, None]
+    x0, v0, g = (np.asarray(a)[None, :] for a in (x0, v0, g))
+    np.testing.assert_allclose(traj.x, x0 + v0 * t + 0.5 * g * t**2, atol=1e-9)
+    np.testing.assert_allclose(traj.v, v0 + g * t, atol=1e-9)
+    Omega = (I3 / I1 - 1) * w3  # torque-free symmetric precession (17.47)
+    np.testing.assert_allclose(traj.omega[:, 0], w_perp * np.cos(Omega * t[:, 0]), atol=1e-9)
+    np.testing.assert_allclose(traj.omega[:, 1], w_perp * np.sin(Omega * t[:, 0]), atol=1e-9)
+    np.testing.assert_allclose(traj.energy, traj.energy[0], rtol=1e-10)
+
+
+# --------------------------------------------------------------------------- constraints
+
+
+def test_projection_bounds_constraint_drift():
+    """Without projection |q| drifts; with it |q| − 1 stays at the interpolation error."""
+    state = initial.from_omega(None, jnp.array([1.0, 0.3, 0.7]))
+    ts = jnp.linspace(0.0, 2000.0, N_OUT)
+    drift = {}
+    for project in (False, True):
+        traj = simulate(free_scene(), state, ts, rtol=1e-6, atol=1e-8, project=project)
+        drift[project] = float(np.max(np.abs(np.asarray(traj.norm_error))))
+    assert drift[True] < 0.5 * drift[False]
+    assert drift[True] < 1e-6
+
+
+def test_dense_output():
+    from test_dynamics_analytic import reference_free_rotor
+
+    state = initial.from_omega(Q0, OMEGA0)
+    traj = simulate(free_scene(), state, TS, rtol=1e-10, atol=1e-12, dense=True)
+    t_mid = np.asarray(TS[1:]) - 0.0123
+    at = traj.at(t_mid)
+    w_ref, q_ref = reference_free_rotor(np.asarray(MOMENTS), np.asarray(OMEGA0),
+                                        np.asarray(Q0), np.concatenate([[0.0], t_mid]))
+    np.testing.assert_allclose(at.ts, t_mid)
+    np.testing.assert_allclose(at.omega, w_ref[1:], atol=1e-8)
+    same_rotation(at.q, q_ref[1:], 1e-8)
+    with pytest.raises(ValueError, match="dense"):
+        simulate(free_scene(), state, TS).at(t_mid)
+
+
+def test_float32(float32):
+    state = initial.from_omega(Q0.astype(jnp.float32), OMEGA0.astype(jnp.float32))
+    traj = simulate(free_scene(), state, jnp.linspace(0.0, 10.0, 21))
+    assert traj.q.dtype == jnp.float32
+    assert int(traj.result) == 0
+    e = np.asarray(traj.kinetic_energy)
+    assert np.max(np.abs(e - e[0])) < 1e-5 * e[0]
+    with pytest.raises(ValueError, match="machine epsilons"):
+        simulate(free_scene(), state, jnp.linspace(0.0, 1.0, 3), rtol=1e-8)
+
+
+# --------------------------------------------------------------------------- bad input
+
+
+def test_bad_inputs_raise_value_errors():
+    scene, state = free_scene(), initial.from_omega(Q0, OMEGA0)
+    with pytest.raises(ValueError, match="zero quaternion"):
+        simulate(scene, State(jnp.zeros(4), state.qdot), TS)
+    with pytest.raises(ValueError, match="not finite"):
+        simulate(scene, State(state.q, state.qdot.at[0].set(jnp.nan)), TS)
+    with pytest.raises(ValueError, match="non-finite"):
+        simulate(scene, State(state.q.at[1].set(jnp.nan), state.qdot), TS)
+    for rtol in (0.0, -1e-6, jnp.nan):
+        with pytest.raises(ValueError, match="rtol"):
+            simulate(scene, state, TS, rtol=rtol)
+    with pytest.raises(ValueError, match="machine epsilons"):
+        simulate(scene, state, TS, rtol=1e-17)
+    with pytest.raises(ValueError, match="atol"):
+        simulate(scene, state, TS, atol=-1.0)
+    with pytest.raises(ValueError, match="increasing"):
+        simulate(scene, state, TS[::-1])
+    with pytest.raises(ValueError, match="max_steps"):
+        simulate(scene, state, TS, max_steps=0)
+    with pytest.raises(ValueError, match="unknown formulation"):
+        simulate(scene, state, TS, formulation="matrix")
+    with pytest.raises(ValueError, match="FreeFlight"):
+        simulate(Scene(scene.body, FreeFlight()), state, TS)
+    with pytest.raises(ValueError, match="orientation"):
+        simulate(top_scene(), state, TS, formulation="body_omega")
+    with pytest.raises(ValueError, match="gimbal lock"):
+        simulate(scene, initial.from_omega(None, OMEGA0), TS, formulation="euler_angles")
+    with pytest.raises(ValueError, match="triangle"):
+        simulate(Scene(RigidBody(jnp.array([1.0, 1.0, 3.0]))), state, TS)
+
+
+def test_nonphysical_body_allowed_when_asked():
+    moments = jnp.array([2.0, 1.0, 2.0 / 3.0])  # Hairer–Lubich–Wanner
+    allowed = RigidBody(moments, allow_nonphysical=True)
+    checked = jax.jit(lambda b: b.check())(allowed)  # simulate runs this inside its jit
+    np.testing.assert_allclose(checked.moments, moments)
+    strict = eqx.filter_jit(lambda m: RigidBody(m).check().moments)
+    with pytest.raises(eqx.EquinoxRuntimeError, match="triangle"):
+        jax.block_until_ready(strict(moments))
+
+
+# --------------------------------------------------------------------------- failures
+
+
+def test_max_steps_exhausted():
+    scene, state = free_scene(), initial.from_omega(Q0, OMEGA0)
+    long = TS * 2e4  # needs far more than the default 100_000 steps at rtol 1e-8
+    with pytest.raises(SimulationError, match=r"max_steps=100000 exhausted") as info:
+        simulate(scene, state, long)
+    assert "t=" in str(info.value) and "raise max_steps" in str(info.value)
+    traj = simulate(scene, state, long, throw=False)
+    assert int(traj.result) == Result.max_steps
+    stop = float(traj.t_stop)
+    assert 0.0 < stop < float(long[-1])
+    assert int(traj.stats["num_steps"]) == 100_000
+    q = np.asarray(traj.q)
+    before = np.asarray(long) <= stop
+    assert np.all(np.isfinite(q[before])) and np.all(np.isnan(q[~before]))
+
+
+def _power_torque(t, kin, params):
+    """c |ω|^(2 power) ω, turning NaN after t_nan (one function: one compiled solve)."""
+    w2 = jnp.dot(kin.omega, kin.omega)
+    nan_after = jnp.where(t > params["t_nan"], jnp.nan, 1.0)
+    return params["c"] * w2 ** params["power"] * kin.omega * nan_after
+
+
+def _power_scene(c, power, t_nan):
+    params = {"c": c, "power": power, "t_nan": t_nan}  # floats become traced arrays
+    return Scene(RigidBody(jnp.full(3, 2.0)), loads=(Torque(_power_torque, params),))
+
+
+def test_user_torque_damping_is_exponential():
+    """Spherical body, N = −c ω: ω(t) = ω0 exp(−c t / I)."""
+    traj = simulate(_power_scene(-0.3, 0.0, np.inf), initial.from_omega(Q0, OMEGA0), TS,
+                    rtol=1e-10, atol=1e-12)
+    decay = np.exp(-0.3 * np.asarray(TS) / 2.0)[:, None]
+    np.testing.assert_allclose(traj.omega, np.asarray(OMEGA0)[None, :] * decay, atol=1e-9)
+
+
+def test_nonfinite_torque_reported():
+    with pytest.raises(SimulationError, match="non-finite") as info:
+        simulate(_power_scene(-0.3, 0.0, 3.0), initial.from_omega(Q0, OMEGA0), TS)
+    assert "t=3" in str(info.value)
+
+
+def test_step_size_collapse_reported():
+    """N = k |ω|² ω blows up at t* = I / (2 k |ω0|²) = 2: a singular solution."""
+    state = initial.from_omega(None, jnp.array([1.0, 0.0, 0.0]))
+    with pytest.raises(SimulationError, match="step size collapsed") as info:
+        simulate(_power_scene(0.5, 1.0, np.inf), state, TS)
+    assert "t=2" in str(info.value)
+    traj = simulate(_power_scene(0.5, 1.0, np.inf), state, TS, throw=False)
+    assert int(traj.result) == Result.step_size_collapse
+    assert abs(float(traj.t_stop) - 2.0) < 1e-6
+
+
+def test_gimbal_lock_detected():
+    # Pure rotation about body x starting tilted: θ runs through π (sin θ = 0).
+    q0 = jnp.array([np.cos(0.25), np.sin(0.25), 0.0, 0.0])
+    state = initial.from_omega(q0, jnp.array([1.0, 0.0, 0.0]))
+    with pytest.raises(SimulationError, match="gimbal lock") as info:
+        simulate(free_scene(), state, TS, formulation="euler_angles")
+    assert "quaternion_acceleration" in str(info.value)
+    # Passing close to the singular line: either it is reported or the result is right.
+    state2 = initial.from_omega(q0, jnp.array([1.0, 0.02, 0.3]))
+    traj = simulate(free_scene(), state2, TS, formulation=EulerAngles(), throw=False)
+    reference = simulate(free_scene(), state2, TS, rtol=1e-10, atol=1e-12)
+    if int(traj.result) != Result.gimbal_lock:
+        assert int(traj.result) == Result.success
+        np.testing.assert_allclose(traj.omega, reference.omega, atol=1e-6)
