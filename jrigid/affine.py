@@ -25,13 +25,11 @@ check runs through ``equinox.error_if`` and raises a runtime error carrying the 
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 
 from jrigid import quaternion as quat
+from jrigid._checks import as_float, fail_if
 
 __all__ = [
     "about_point",
@@ -62,27 +60,13 @@ __all__ = [
 # --------------------------------------------------------------------------- helpers
 
 
-def _float(x) -> jax.Array:
-    x = jnp.asarray(x)
-    if not jnp.issubdtype(x.dtype, jnp.floating):
-        x = x.astype(jnp.result_type(float))
-    return x
 
 
-def _fail_if(x, bad, message: str, detail: Callable[[], str] | None = None):
-    """Raise ``ValueError`` if any of ``bad`` holds; under tracing use ``eqx.error_if``."""
-    try:
-        is_bad = bool(jnp.any(bad))
-    except jax.errors.ConcretizationTypeError:
-        return eqx.error_if(x, bad, message)
-    if is_bad:
-        raise ValueError(message + (f" ({detail()})" if detail is not None else ""))
-    return x
 
 
 def _matrix(rows) -> jax.Array:
     """Stack a nested list of equally batched scalars ``(...)`` into ``(..., r, c)``."""
-    flat = jnp.broadcast_arrays(*[_float(e) for row in rows for e in row])
+    flat = jnp.broadcast_arrays(*[as_float(e) for row in rows for e in row])
     ncol = len(rows[0])
     stacked = jnp.stack(flat, axis=-1)
     return stacked.reshape(stacked.shape[:-1] + (len(rows), ncol))
@@ -118,7 +102,7 @@ def from_blocks(A, d) -> jax.Array:
     Returns:
         ``(..., n+1, n+1)``; batch dimensions of ``A`` and ``d`` broadcast.
     """
-    A, d = _float(A), _float(d)
+    A, d = as_float(A), as_float(d)
     n = _dim_of_vector(d, "d")
     if A.ndim < 2 or A.shape[-2:] != (n, n):
         raise ValueError(f"A must have shape (..., {n}, {n}) to match d {d.shape}, got {A.shape}")
@@ -133,7 +117,7 @@ def from_blocks(A, d) -> jax.Array:
 
 def to_blocks(T) -> tuple[jax.Array, jax.Array]:
     """Split ``T`` of shape ``(..., n+1, n+1)`` into ``A (..., n, n)`` and ``d (..., n)`` (17.7)."""
-    T = _float(T)
+    T = as_float(T)
     n = _dim_of_transform(T)
     return T[..., :n, :n], T[..., :n, n]
 
@@ -147,7 +131,7 @@ def translation(d) -> jax.Array:
     Returns:
         ``(..., 3, 3)`` or ``(..., 4, 4)``.
     """
-    d = _float(d)
+    d = as_float(d)
     n = _dim_of_vector(d, "d")
     return from_blocks(jnp.eye(n, dtype=d.dtype), d)
 
@@ -161,7 +145,7 @@ def scaling(s) -> jax.Array:
     Returns:
         ``(..., 3, 3)`` or ``(..., 4, 4)``.
     """
-    s = _float(s)
+    s = as_float(s)
     n = _dim_of_vector(s, "s")
     A = s[..., :, None] * jnp.broadcast_to(jnp.eye(n, dtype=s.dtype), s.shape[:-1] + (n, n))
     return from_blocks(A, jnp.zeros(n, dtype=s.dtype))
@@ -176,7 +160,7 @@ def shear_2d(kx, ky=0.0) -> jax.Array:
     Returns:
         ``(..., 3, 3)``.
     """
-    kx, ky = _float(kx), _float(ky)
+    kx, ky = as_float(kx), as_float(ky)
     one, zero = jnp.ones_like(kx), jnp.zeros_like(kx)
     return _matrix([[one, kx, zero], [ky, one, zero], [zero, zero, one]])
 
@@ -190,7 +174,7 @@ def shear_3d(xy=0.0, xz=0.0, yx=0.0, yz=0.0, zx=0.0, zy=0.0) -> jax.Array:
     Returns:
         ``(..., 4, 4)``.
     """
-    xy = _float(xy)
+    xy = as_float(xy)
     one, zero = jnp.ones_like(xy), jnp.zeros_like(xy)
     return _matrix(
         [
@@ -215,7 +199,7 @@ def about_point(T, pivot) -> jax.Array:
     Returns:
         ``(..., n+1, n+1)``.
     """
-    T, pivot = _float(T), _float(pivot)
+    T, pivot = as_float(T), as_float(pivot)
     n = _dim_of_transform(T)
     if pivot.ndim < 1 or pivot.shape[-1] != n:
         raise ValueError(
@@ -238,7 +222,7 @@ def rotation_2d(angle, pivot=None) -> jax.Array:
     Returns:
         ``(..., 3, 3)``.
     """
-    angle = _float(angle)
+    angle = as_float(angle)
     c, s = jnp.cos(angle), jnp.sin(angle)
     one, zero = jnp.ones_like(c), jnp.zeros_like(c)
     T = _matrix([[c, -s, zero], [s, c, zero], [zero, zero, one]])
@@ -255,7 +239,7 @@ def rotation_3d(q, pivot=None) -> jax.Array:
     Returns:
         ``(..., 4, 4)`` whose upper-left block is ``quaternion.to_matrix(q)``.
     """
-    q = _float(q)
+    q = as_float(q)
     if q.ndim < 1 or q.shape[-1] != 4:
         raise ValueError(f"q must have shape (..., 4), got {q.shape}")
     R = quat.to_matrix(q)
@@ -274,9 +258,9 @@ def rotation_3d_axis_angle(axis, angle, pivot=None) -> jax.Array:
     Returns:
         ``(..., 4, 4)``.
     """
-    axis = _float(axis)
+    axis = as_float(axis)
     _check_vector3(axis, "axis")
-    return rotation_3d(quat.from_axis_angle(axis, _float(angle)), pivot)
+    return rotation_3d(quat.from_axis_angle(axis, as_float(angle)), pivot)
 
 
 def rotation_3d_euler(seq: str, angles, pivot=None) -> jax.Array:
@@ -290,7 +274,7 @@ def rotation_3d_euler(seq: str, angles, pivot=None) -> jax.Array:
     Returns:
         ``(..., 4, 4)``.
     """
-    angles = _float(angles)
+    angles = as_float(angles)
     _check_vector3(angles, "angles")
     return rotation_3d(quat.from_euler(seq, angles), pivot)
 
@@ -309,7 +293,7 @@ def compose(*transforms) -> jax.Array:
     """
     if not transforms:
         raise ValueError("compose needs at least one transform")
-    Ts = [_float(T) for T in transforms]
+    Ts = [as_float(T) for T in transforms]
     dims = {_dim_of_transform(T, f"transform {i}") for i, T in enumerate(Ts)}
     if len(dims) != 1:
         raise ValueError(f"cannot compose 2D and 3D transforms: shapes {[T.shape for T in Ts]}")
@@ -331,12 +315,12 @@ def inverse(T) -> jax.Array:
     Returns:
         ``(..., n+1, n+1)``.
     """
-    T = _float(T)
+    T = as_float(T)
     n1 = _dim_of_transform(T) + 1
     sv = jax.lax.stop_gradient(jnp.linalg.svd(T, compute_uv=False))
     tol = n1 * jnp.finfo(T.dtype).eps * sv[..., 0]
     singular = ~(sv[..., -1] > tol)
-    T = _fail_if(
+    T = fail_if(
         T,
         singular,
         "inverse: matrix is singular (or not finite)",
@@ -374,7 +358,7 @@ def to_homogeneous(x, w) -> jax.Array:
     Returns:
         ``(..., n+1)``.
     """
-    x = _float(x)
+    x = as_float(x)
     _dim_of_vector(x, "x")
     w = jnp.broadcast_to(jnp.asarray(w, dtype=x.dtype), x.shape[:-1])
     return jnp.concatenate([x, w[..., None]], axis=-1)
@@ -385,7 +369,7 @@ def from_homogeneous(X) -> jax.Array:
 
     ``w = 0`` (a vector or a point at infinity) gives ``inf``/``nan``.
     """
-    X = _float(X)
+    X = as_float(X)
     if X.ndim < 1 or X.shape[-1] not in (3, 4):
         raise ValueError(f"X must have shape (..., 3) or (..., 4), got {X.shape}")
     return X[..., :-1] / X[..., -1:]
@@ -401,7 +385,7 @@ def apply(T, X) -> jax.Array:
     Returns:
         ``(..., n+1)``.
     """
-    T, X = _float(T), _float(X)
+    T, X = as_float(T), as_float(X)
     n = _dim_of_transform(T)
     if X.ndim < 1 or X.shape[-1] != n + 1:
         raise ValueError(f"X must have shape (..., {n + 1}) to match T {T.shape}, got {X.shape}")
@@ -427,7 +411,7 @@ def apply_to_points(T, p) -> jax.Array:
     Returns:
         ``(..., n)``.
     """
-    T, p = _float(T), _float(p)
+    T, p = as_float(T), as_float(p)
     n = _check_cartesian(T, p, "p")
     Y = (T @ to_homogeneous(p, 1.0)[..., None])[..., 0]
     return Y[..., :n] / Y[..., n:]
@@ -445,7 +429,7 @@ def apply_to_vectors(T, v) -> jax.Array:
     Returns:
         ``(..., n)``.
     """
-    T, v = _float(T), _float(v)
+    T, v = as_float(T), as_float(v)
     n = _check_cartesian(T, v, "v")
     return (T[..., :n, :n] @ v[..., None])[..., 0]
 
@@ -468,7 +452,7 @@ def orthographic(points, axis: int = 2) -> tuple[jax.Array, jax.Array]:
         ``(uv, depth)``: ``uv (..., 2)`` and ``depth = -points[..., axis]`` ``(...)``,
         larger depth is farther away: draw in order of decreasing depth (back to front).
     """
-    points = _float(points)
+    points = as_float(points)
     _check_vector3(points, "points")
     if axis not in (0, 1, 2):
         raise ValueError(f"axis must be 0, 1 or 2, got {axis!r}")
@@ -497,7 +481,7 @@ def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> jax.Array:
     Returns:
         ``(..., 4, 4)``.
     """
-    eye, target, up = _float(eye), _float(target), _float(up)
+    eye, target, up = as_float(eye), as_float(target), as_float(up)
     for name, x in (("eye", eye), ("target", target), ("up", up)):
         _check_vector3(x, name)
     eye, target, up = jnp.broadcast_arrays(eye, target, up)
@@ -505,7 +489,7 @@ def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> jax.Array:
     dist, zero = _safe_norm(forward)
     scale = jnp.maximum(jnp.max(jnp.abs(eye), axis=-1), jnp.max(jnp.abs(target), axis=-1))
     tiny = jnp.finfo(forward.dtype).eps * jnp.maximum(scale, 1.0)
-    forward = _fail_if(
+    forward = fail_if(
         forward,
         ~(dist > tiny),
         "look_at: zero-length look direction (eye == target)",
@@ -515,7 +499,7 @@ def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> jax.Array:
     right = jnp.cross(f, up)
     rnorm, rzero = _safe_norm(right)
     unorm, _ = _safe_norm(up)
-    right = _fail_if(
+    right = fail_if(
         right,
         ~(rnorm > 1e3 * jnp.finfo(right.dtype).eps * unorm),
         "look_at: `up` is zero or parallel to the look direction",
@@ -550,10 +534,10 @@ def perspective(
     Returns:
         ``(uv, depth)``: ``uv (..., 2)`` and ``depth (...)``; batches broadcast.
     """
-    points = _float(points)
+    points = as_float(points)
     _check_vector3(points, "points")
-    fov, aspect = _float(fov), _float(aspect)
-    fov = _fail_if(
+    fov, aspect = as_float(fov), as_float(aspect)
+    fov = fail_if(
         fov,
         ~((fov > 0) & (fov < jnp.pi)),
         "perspective: fov must be in (0, π) radians",

@@ -16,19 +16,13 @@ from jax.typing import ArrayLike
 
 from jrigid import inertia
 from jrigid import quaternion as quat
+from jrigid._checks import as_float, is_traced
 
 __all__ = ["RigidBody"]
 
 
-def _float(x: ArrayLike) -> jax.Array:
-    """A strongly typed float array (weak types would change the compiled signature)."""
-    x = jnp.asarray(x)
-    dtype = x.dtype if jnp.issubdtype(x.dtype, jnp.floating) else jnp.result_type(float)
-    return jnp.asarray(x, dtype=jax.dtypes.canonicalize_dtype(dtype))
 
 
-def _concrete(*xs) -> bool:
-    return not any(isinstance(x, jax.core.Tracer) for x in xs)
 
 
 class RigidBody(eqx.Module):
@@ -55,10 +49,10 @@ class RigidBody(eqx.Module):
     deferred to :func:`jrigid.simulate`, which runs them with ``equinox.error_if``.
     """
 
-    moments: jax.Array = eqx.field(converter=_float)
-    mass: jax.Array = eqx.field(converter=_float, default=1.0)
-    com: jax.Array = eqx.field(converter=_float, default=(0.0, 0.0, 0.0))
-    frame: jax.Array = eqx.field(converter=_float, default=(1.0, 0.0, 0.0, 0.0))
+    moments: jax.Array = eqx.field(converter=as_float)
+    mass: jax.Array = eqx.field(converter=as_float, default=1.0)
+    com: jax.Array = eqx.field(converter=as_float, default=(0.0, 0.0, 0.0))
+    frame: jax.Array = eqx.field(converter=as_float, default=(1.0, 0.0, 0.0, 0.0))
     allow_nonphysical: bool = eqx.field(static=True, default=False, kw_only=True)
 
     def __check_init__(self):
@@ -68,7 +62,7 @@ class RigidBody(eqx.Module):
             raise ValueError(f"com must have shape (..., 3), got {self.com.shape}")
         if self.frame.shape[-1:] != (4,):
             raise ValueError(f"frame must have shape (..., 4), got {self.frame.shape}")
-        if not _concrete(self.moments, self.mass, self.com):
+        if is_traced(self.moments, self.mass, self.com):
             return
         inertia.validate(
             self.moments, kind="moments", allow_nonphysical=self.allow_nonphysical
@@ -108,13 +102,13 @@ class RigidBody(eqx.Module):
             ValueError: for a non-symmetric, non-finite or non-physical tensor (concrete
                 values only).
         """
-        tensor = _float(tensor)
+        tensor = as_float(tensor)
         if tensor.shape[-2:] != (3, 3):
             raise ValueError(f"tensor must have shape (..., 3, 3), got {tensor.shape}")
-        if _concrete(tensor):
+        if not is_traced(tensor):
             inertia.validate(tensor, kind="tensor", allow_nonphysical=allow_nonphysical)
         moments, frame = inertia.principal_axes(tensor)
-        com_principal = quat.rotate_inverse(frame, _float(com))
+        com_principal = quat.rotate_inverse(frame, as_float(com))
         return cls(moments, mass, com_principal, frame, allow_nonphysical=allow_nonphysical)
 
     def tensor(self) -> jax.Array:

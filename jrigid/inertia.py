@@ -20,6 +20,7 @@ import jax
 import jax.numpy as jnp
 
 from jrigid import quaternion as quat
+from jrigid._checks import as_float
 
 __all__ = [
     "box",
@@ -41,16 +42,11 @@ __all__ = [
 ]
 
 
-def _float(x) -> jax.Array:
-    x = jnp.asarray(x)
-    if not jnp.issubdtype(x.dtype, jnp.floating):
-        x = x.astype(jnp.result_type(float))
-    return x
 
 
 def _moments(*columns) -> jax.Array:
     """Stack three broadcast-compatible ``(...)`` arrays into ``(..., 3)``."""
-    return jnp.stack(jnp.broadcast_arrays(*[_float(c) for c in columns]), axis=-1)
+    return jnp.stack(jnp.broadcast_arrays(*[as_float(c) for c in columns]), axis=-1)
 
 
 def _eye(like: jax.Array) -> jax.Array:
@@ -81,7 +77,7 @@ def ellipsoid(m, a, b, c) -> jax.Array:
     Returns:
         ``(..., 3)``: ``m (b²+c², a²+c², a²+b²) / 5``.
     """
-    m, a, b, c = jnp.broadcast_arrays(*[_float(x) for x in (m, a, b, c)])
+    m, a, b, c = jnp.broadcast_arrays(*[as_float(x) for x in (m, a, b, c)])
     a2, b2, c2 = a * a, b * b, c * c
     return _moments(m * (b2 + c2) / 5, m * (a2 + c2) / 5, m * (a2 + b2) / 5)
 
@@ -96,7 +92,7 @@ def box(m, a, b, c) -> jax.Array:
     Returns:
         ``(..., 3)``: ``m (b²+c², a²+c², a²+b²) / 12`` (Table 17.1).
     """
-    m, a, b, c = jnp.broadcast_arrays(*[_float(x) for x in (m, a, b, c)])
+    m, a, b, c = jnp.broadcast_arrays(*[as_float(x) for x in (m, a, b, c)])
     a2, b2, c2 = a * a, b * b, c * c
     return _moments(m * (b2 + c2) / 12, m * (a2 + c2) / 12, m * (a2 + b2) / 12)
 
@@ -111,7 +107,7 @@ def sphere(m, r) -> jax.Array:
     Returns:
         ``(..., 3)``.
     """
-    m, r = jnp.broadcast_arrays(_float(m), _float(r))
+    m, r = jnp.broadcast_arrays(as_float(m), as_float(r))
     i = 0.4 * m * r * r
     return _moments(i, i, i)
 
@@ -127,7 +123,7 @@ def thin_rod(m, length) -> jax.Array:
         ``(..., 3)``: ``(m l²/12, m l²/12, 0)``. The zero moment makes the rod a
         degenerate body: :func:`validate` rejects it as not positive definite.
     """
-    m, length = jnp.broadcast_arrays(_float(m), _float(length))
+    m, length = jnp.broadcast_arrays(as_float(m), as_float(length))
     i = m * length * length / 12
     return _moments(i, i, jnp.zeros_like(i))
 
@@ -142,7 +138,7 @@ def thin_disk(m, r) -> jax.Array:
     Returns:
         ``(..., 3)``: ``(m r²/4, m r²/4, m r²/2)``.
     """
-    m, r = jnp.broadcast_arrays(_float(m), _float(r))
+    m, r = jnp.broadcast_arrays(as_float(m), as_float(r))
     i = m * r * r / 4
     return _moments(i, i, 2 * i)
 
@@ -160,7 +156,7 @@ def thin_plate(m, a, b) -> jax.Array:
     Returns:
         ``(..., 3)``: ``(m b²/12, m a²/12, m (a²+b²)/12)``.
     """
-    m, a, b = jnp.broadcast_arrays(_float(m), _float(a), _float(b))
+    m, a, b = jnp.broadcast_arrays(as_float(m), as_float(a), as_float(b))
     ix, iy = m * b * b / 12, m * a * a / 12
     return _moments(ix, iy, ix + iy)
 
@@ -176,7 +172,7 @@ def solid_cylinder(m, r, h) -> jax.Array:
     Returns:
         ``(..., 3)``: ``(m(3r²+h²)/12, m(3r²+h²)/12, m r²/2)`` (17.31 integrated).
     """
-    m, r, h = jnp.broadcast_arrays(_float(m), _float(r), _float(h))
+    m, r, h = jnp.broadcast_arrays(as_float(m), as_float(r), as_float(h))
     i = m * (3 * r * r + h * h) / 12
     return _moments(i, i, m * r * r / 2)
 
@@ -208,7 +204,7 @@ def to_tensor(moments) -> jax.Array:
     Returns:
         ``(..., 3, 3)``.
     """
-    moments = _float(moments)
+    moments = as_float(moments)
     if moments.ndim < 1 or moments.shape[-1] != 3:
         raise ValueError(f"moments must have shape (..., 3), got {moments.shape}")
     return moments[..., :, None] * _eye(moments)
@@ -229,7 +225,7 @@ def from_point_masses(masses, positions, origin=None) -> jax.Array:
     Returns:
         ``(..., 3, 3)``.
     """
-    masses, positions = _float(masses), _float(positions)
+    masses, positions = as_float(masses), as_float(positions)
     if positions.ndim < 2 or positions.shape[-1] != 3:
         raise ValueError(f"positions must have shape (..., N, 3), got {positions.shape}")
     if masses.ndim < 1 or masses.shape[-1] != positions.shape[-2]:
@@ -246,7 +242,7 @@ def from_point_masses(masses, positions, origin=None) -> jax.Array:
             masses, axis=-1, keepdims=True
         )
     else:
-        origin = _float(origin)
+        origin = as_float(origin)
         if origin.ndim < 1 or origin.shape[-1] != 3:
             raise ValueError(f"origin must have shape (..., 3), got {origin.shape}")
         batch = jnp.broadcast_shapes(batch, origin.shape[:-1])
@@ -272,7 +268,7 @@ def parallel_axis(I_cm, mass, d) -> jax.Array:
     Returns:
         ``(..., 3, 3)``.
     """
-    I_cm, mass, d = _float(I_cm), _float(mass), _float(d)
+    I_cm, mass, d = as_float(I_cm), as_float(mass), as_float(d)
     _check_tensor(I_cm, "I_cm")
     if d.ndim < 1 or d.shape[-1] != 3:
         raise ValueError(f"d must have shape (..., 3), got {d.shape}")
@@ -298,7 +294,7 @@ def rotate_tensor_by_matrix(inertia, R) -> jax.Array:
     Returns:
         ``(..., 3, 3)``.
     """
-    inertia, R = _float(inertia), _float(R)
+    inertia, R = as_float(inertia), as_float(R)
     _check_tensor(inertia)
     _check_tensor(R, "R")
     return R @ inertia @ jnp.swapaxes(R, -1, -2)
@@ -314,7 +310,7 @@ def rotate_tensor(inertia, q) -> jax.Array:
     Returns:
         ``(..., 3, 3)`` in the space frame. ``rotate_tensor(I, quat.conjugate(q))`` goes back.
     """
-    q = _float(q)
+    q = as_float(q)
     if q.ndim < 1 or q.shape[-1] != 4:
         raise ValueError(f"q must have shape (..., 4), got {q.shape}")
     return rotate_tensor_by_matrix(inertia, quat.to_matrix(q))
@@ -336,7 +332,7 @@ def principal_axes(inertia) -> tuple[jax.Array, jax.Array]:
     Returns:
         ``(moments, q)``: ``moments (..., 3)`` in ascending order, ``q (..., 4)``.
     """
-    inertia = _float(inertia)
+    inertia = as_float(inertia)
     _check_tensor(inertia)
     sym = 0.5 * (inertia + jnp.swapaxes(inertia, -1, -2))
     moments, V = jnp.linalg.eigh(sym)
@@ -408,7 +404,7 @@ def check(inertia, *, allow_nonphysical: bool = False, kind: str | None = None, 
     Returns:
         ``inertia`` unchanged (as a float array).
     """
-    inertia = _float(inertia)
+    inertia = as_float(inertia)
     kind = _kind(inertia, kind)
     for name, bad, _, _ in _conditions(inertia, kind, allow_nonphysical, rtol):
         inertia = eqx.error_if(inertia, bad, f"inertia is not valid: {name}")
@@ -437,7 +433,7 @@ def validate(inertia, *, allow_nonphysical: bool = False, kind: str | None = Non
     Returns:
         ``inertia`` unchanged (as a float array).
     """
-    inertia = _float(inertia)
+    inertia = as_float(inertia)
     kind = _kind(inertia, kind)
     if isinstance(inertia, jax.core.Tracer):
         return check(inertia, allow_nonphysical=allow_nonphysical, kind=kind, rtol=rtol)

@@ -15,36 +15,22 @@ conditions are checked with ``equinox.error_if``.
 
 from __future__ import annotations
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 from jax.typing import ArrayLike
 
 from jrigid import quaternion as quat
+from jrigid._checks import as_float, fail_if
 from jrigid.scene import Scene
 from jrigid.state import State
 
 __all__ = ["from_euler_rates", "from_momentum_energy", "from_omega", "tilted"]
 
 
-def _float(x: ArrayLike) -> jax.Array:
-    """A strongly typed float array (weak types would change the compiled signature)."""
-    x = jnp.asarray(x)
-    dtype = x.dtype if jnp.issubdtype(x.dtype, jnp.floating) else jnp.result_type(float)
-    return jnp.asarray(x, dtype=jax.dtypes.canonicalize_dtype(dtype))
 
 
-def _traced(*xs) -> bool:
-    return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(xs))
 
 
-def _fail(x: jax.Array, bad: jax.Array, message: str) -> jax.Array:
-    """Raise ``ValueError(message)`` if ``bad`` (concrete) or defer to ``eqx.error_if``."""
-    if _traced(x, bad):
-        return eqx.error_if(x, bad, message)
-    if bool(jnp.any(bad)):
-        raise ValueError(message)
-    return x
 
 
 def unit_quaternion(q: ArrayLike, name: str = "q") -> jax.Array:
@@ -60,21 +46,21 @@ def unit_quaternion(q: ArrayLike, name: str = "q") -> jax.Array:
     Raises:
         ValueError: wrong shape, non-finite entries, or (near) zero norm.
     """
-    q = _float(q)
+    q = as_float(q)
     if q.shape[-1:] != (4,):
         raise ValueError(f"{name} must have shape (..., 4), got {q.shape}")
     n = jnp.sqrt(jnp.sum(q * q, axis=-1))
-    q = _fail(q, ~jnp.isfinite(q), f"{name} has non-finite entries (NaN or inf)")
+    q = fail_if(q, ~jnp.isfinite(q), f"{name} has non-finite entries (NaN or inf)")
     tiny = jnp.sqrt(jnp.finfo(q.dtype).tiny)
-    q = _fail(q, n <= tiny, f"{name} is the zero quaternion: it represents no rotation")
+    q = fail_if(q, n <= tiny, f"{name} is the zero quaternion: it represents no rotation")
     return q / jnp.maximum(n, tiny)[..., None]
 
 
 def _vector(x: ArrayLike, name: str) -> jax.Array:
-    x = _float(x)
+    x = as_float(x)
     if x.shape[-1:] != (3,):
         raise ValueError(f"{name} must have shape (..., 3), got {x.shape}")
-    return _fail(x, ~jnp.isfinite(x), f"{name} has non-finite entries (NaN or inf)")
+    return fail_if(x, ~jnp.isfinite(x), f"{name} has non-finite entries (NaN or inf)")
 
 
 def _translation(x, v):
@@ -128,7 +114,7 @@ def euler_rates_to_omega(angles: ArrayLike, rates: ArrayLike) -> jax.Array:
     Returns:
         ``(..., 3)`` body angular velocity.
     """
-    angles, rates = _float(angles), _float(rates)
+    angles, rates = as_float(angles), as_float(rates)
     _, th, ps = angles[..., 0], angles[..., 1], angles[..., 2]
     dph, dth, dps = rates[..., 0], rates[..., 1], rates[..., 2]
     st, ct, sp, cp = jnp.sin(th), jnp.cos(th), jnp.sin(ps), jnp.cos(ps)
@@ -210,7 +196,7 @@ def from_momentum_energy(
             scene whose centre of mass is off the principal axes (non-diagonal inertia).
     """
     momentum = _vector(momentum, "momentum")
-    energy = _float(energy)
+    energy = as_float(energy)
     if momentum.shape != (3,) or energy.shape != ():
         raise ValueError("from_momentum_energy expects momentum (3,) and a scalar energy")
     tensor = scene.inertia()
@@ -222,13 +208,13 @@ def from_momentum_energy(
     two_t = 2.0 * energy
     lo, hi = l2 / i_hi, l2 / i_lo
     slack = 1e-12 * hi
-    two_t = _fail(
+    two_t = fail_if(
         two_t,
         off > 1e-12 * jnp.max(moments),
         "from_momentum_energy: inertia about the rotation centre is not diagonal",
     )
-    two_t = _fail(two_t, l2 <= 0, "from_momentum_energy: momentum must be non-zero")
-    two_t = _fail(
+    two_t = fail_if(two_t, l2 <= 0, "from_momentum_energy: momentum must be non-zero")
+    two_t = fail_if(
         two_t,
         (two_t < lo - slack) | (two_t > hi + slack),
         "from_momentum_energy: energy is outside [|L|²/(2 I_max), |L|²/(2 I_min)] "
@@ -279,7 +265,7 @@ def tilted(
     toward = (axis + 1) % 3 if toward is None else toward
     if toward not in (0, 1, 2) or toward == axis:
         raise ValueError(f"toward must be an axis index other than {axis}, got {toward!r}")
-    angle, rate = _float(angle), _float(rate)
+    angle, rate = as_float(angle), as_float(rate)
     dtype = jnp.result_type(angle, rate)
     omega = jnp.zeros(3, dtype=dtype)
     omega = omega.at[axis].set(rate * jnp.cos(angle)).at[toward].set(rate * jnp.sin(angle))

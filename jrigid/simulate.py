@@ -47,6 +47,7 @@ import jax
 import jax.numpy as jnp
 from jax.typing import ArrayLike
 
+from jrigid._checks import is_traced
 from jrigid.formulations import AbstractFormulation, get_formulation
 from jrigid.scene import Scene
 from jrigid.state import State
@@ -193,8 +194,6 @@ class ProjectedSolver(diffrax.AbstractWrappedSolver):
 # --------------------------------------------------------------------------- checks
 
 
-def _is_traced(tree) -> bool:
-    return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(tree))
 
 
 def _as(x, dtype, name: str, shape: tuple[int, ...]) -> jax.Array:
@@ -277,7 +276,7 @@ def _flags(formulation, scene, state, ts, rtol, atol):
 
 def validate(formulation, scene, state, ts, rtol, atol) -> None:
     """Raise ``ValueError`` for the first failed value check (concrete inputs only)."""
-    if _is_traced((scene, state, ts, rtol, atol)):
+    if is_traced((scene, state, ts, rtol, atol)):
         return
     flags = jax.device_get(_flags(formulation, scene, state, ts, rtol, atol))
     if flags.any():
@@ -446,7 +445,7 @@ def simulate(
     validate(formulation, scene, state, ts, rtol, atol)
     if dt0 is not None:
         dt0 = jnp.asarray(dt0, dtype=dtype)
-        if not _is_traced(dt0) and not bool(jnp.isfinite(dt0) & (dt0 > 0)):
+        if not is_traced(dt0) and not bool(jnp.isfinite(dt0) & (dt0 > 0)):
             raise ValueError(f"dt0 must be finite and > 0, got {dt0}")
     project = bool(project) and formulation.carries_quaternion
     traj = _solve(
@@ -455,7 +454,7 @@ def simulate(
     )
     if not throw:
         return traj
-    if _is_traced(traj.result):
+    if is_traced(traj.result):
         messages = [""] + [_traced_message(Result(k), max_steps) for k in range(1, len(Result))]
         return eqx.branched_error_if(traj, traj.result != 0, traj.result, messages)
     code = Result(int(traj.result))

@@ -6,6 +6,8 @@ import jax
 import jax.numpy as jnp
 from jax.typing import ArrayLike
 
+from jrigid._checks import is_traced  # noqa: F401  (re-exported for the quaternion modules)
+
 
 def as_float(x: ArrayLike) -> jax.Array:
     """Convert to a JAX array with a floating dtype (ints become the default float)."""
@@ -67,8 +69,3 @@ def cross(a: jax.Array, b: jax.Array) -> jax.Array:
 def dot(a: jax.Array, b: jax.Array) -> jax.Array:
     """Dot product over the last axis; batch shapes must already agree."""
     return jnp.sum(a * b, axis=-1)
-
-
-def is_traced(*xs) -> bool:
-    """True if any argument is a JAX tracer (inside jit, vmap, grad, ...)."""
-    return any(isinstance(x, jax.core.Tracer) for x in xs)

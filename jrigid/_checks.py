@@ -1,0 +1,44 @@
+"""Private input helpers shared by every layer: float conversion and error reporting.
+
+Errors follow one rule across jrigid: with concrete values a bad input raises
+``ValueError`` naming the problem; under ``jit``/``vmap``/``grad`` (traced values) the
+same message is raised at run time through ``equinox.error_if``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jax.typing import ArrayLike
+
+
+def as_float(x: ArrayLike) -> jax.Array:
+    """``x`` as a strongly typed floating array (ints become the default float).
+
+    Strong typing keeps Python scalars from changing a compiled signature.
+    """
+    x = jnp.asarray(x)
+    dtype = x.dtype if jnp.issubdtype(x.dtype, jnp.inexact) else jnp.result_type(float)
+    return jnp.asarray(x, dtype=jax.dtypes.canonicalize_dtype(dtype))
+
+
+def is_traced(*trees) -> bool:
+    """True if any leaf of the arguments is a JAX tracer (inside jit, vmap, grad, ...)."""
+    return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(trees))
+
+
+def fail_if(x, bad: ArrayLike, message: str, detail: Callable[[], str] | None = None):
+    """Return ``x``, or fail with ``message`` where ``bad`` holds.
+
+    Concrete ``bad``: raise ``ValueError(message)`` now, even inside ``jit`` (with
+    ``detail()`` appended when given, so the offending values can be named). Traced
+    ``bad``: ``equinox.error_if`` raises at run time.
+    """
+    if is_traced(bad):
+        return eqx.error_if(x, bad, message)
+    if bool(jnp.any(bad)):
+        raise ValueError(message + (f" ({detail()})" if detail is not None else ""))
+    return x
