@@ -1,0 +1,328 @@
+"""Observations of a rotating body and their (whitened) residuals and losses.
+
+Each observation holds sample times ``ts (T,)``, data and a noise level ``sigma``, and
+turns a :class:`Prediction` at those times into whitened residuals ``r`` (independent,
+unit variance if the model is right). Its negative log-likelihood is ``½ Σ r²``
+(:meth:`loss`); the Gauss–Newton covariance of :func:`jrigid.fit.laplace` is built from
+the Jacobian of ``r``.
+
+- :class:`Gyroscope` — angular velocity (body principal frame, the body's reference
+  frame, or space), residual ``(ω − ω̂)/σ``;
+- :class:`Orientations` — orientation quaternions, compared sign-invariantly:
+  ``r = 2 sign(w) vec(q̂* ⊗ q)/σ`` with ``w = q̂·q``, so that ``|r|² σ² / 4 = 1 − (q̂·q)²``
+  (:func:`orientation_loss`) and ``σ`` is the noise of the rotation angle about each axis;
+- :class:`AxisDirections` — the direction in space of a marked body axis (a camera
+  tracking it), residual ``(R e − û)/σ``.
+
+Construction validates the data and raises ``ValueError`` naming the problem (wrong
+shapes, NaN/inf, fewer than ``2`` samples, times not strictly increasing, a
+non-positive ``sigma``, a zero quaternion or direction). Construct observations outside
+``jit``.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.typing import ArrayLike
+
+from jrigid import quaternion as quat
+
+__all__ = [
+    "AxisDirections",
+    "Gyroscope",
+    "Orientations",
+    "Prediction",
+    "axis_loss",
+    "gyroscope_loss",
+    "orientation_loss",
+]
+
+_FRAMES = ("principal", "reference", "space")
+
+
+class Prediction(NamedTuple):
+    """What a forward model predicts at ``T`` times.
+
+    Attributes:
+        q: ``(T, 4)`` unit orientation of the principal frame (body → space), or ``None``.
+        omega: ``(T, 3)`` body angular velocity in the principal frame.
+        frame: ``(4,)`` principal → reference-frame rotation (``RigidBody.frame``).
+    """
+
+    q: jax.Array | None
+    omega: jax.Array
+    frame: jax.Array
+
+
+# --------------------------------------------------------------------------- plain losses
+
+
+def gyroscope_loss(omega: ArrayLike, omega_obs: ArrayLike, sigma: ArrayLike = 1.0) -> jax.Array:
+    """``½ Σ |(ω − ω̂)/σ|²``: Gaussian negative log-likelihood of a gyroscope record.
+
+    Args:
+        omega: ``(T, 3)`` predicted angular velocity.
+        omega_obs: ``(T, 3)`` observed.
+        sigma: noise standard deviation, broadcastable to ``(T, 3)``.
+
+    Returns:
+        ``()`` loss.
+    """
+    r = (jnp.asarray(omega) - jnp.asarray(omega_obs)) / jnp.asarray(sigma)
+    return 0.5 * jnp.sum(r * r)
+
+
+def _orientation_residual(q: jax.Array, q_obs: jax.Array) -> jax.Array:
+    """``(..., 3)`` ``2 sign(q̂·q) vec(q̂* ⊗ q)``: sign-invariant, ≈ the rotation vector error."""
+    rel = quat.multiply(quat.conjugate(q_obs), q)
+    sign = jnp.where(rel[..., :1] >= 0, 1.0, -1.0)
+    return 2.0 * sign * rel[..., 1:]
+
+
+def orientation_loss(q: ArrayLike, q_obs: ArrayLike) -> jax.Array:
+    """Mean of ``1 − (q·q̂)²`` over samples: sign-invariant (``q ≡ −q``), zero iff equal.
+
+    ``1 − (q·q̂)² = sin²(θ/2)`` with ``θ`` the angle of the rotation taking one
+    orientation to the other.
+
+    Args:
+        q: ``(T, 4)`` predicted unit quaternions.
+        q_obs: ``(T, 4)`` observed unit quaternions.
+
+    Returns:
+        ``()`` loss in ``[0, 1]``.
+    """
+    d = jnp.sum(jnp.asarray(q) * jnp.asarray(q_obs), axis=-1)
+    return jnp.mean(1.0 - d * d)
+
+
+def axis_loss(
+    directions: ArrayLike, directions_obs: ArrayLike, sigma: ArrayLike = 1.0
+) -> jax.Array:
+    """``½ Σ |(u − û)/σ|²`` for unit direction vectors.
+
+    Args:
+        directions: ``(T, 3)`` predicted unit vectors.
+        directions_obs: ``(T, 3)`` observed unit vectors.
+        sigma: noise per component, broadcastable to ``(T, 3)``.
+
+    Returns:
+        ``()`` loss.
+    """
+    r = (jnp.asarray(directions) - jnp.asarray(directions_obs)) / jnp.asarray(sigma)
+    return 0.5 * jnp.sum(r * r)
+
+
+# --------------------------------------------------------------------------- validation
+
+
+def _times(ts) -> jax.Array:
+    ts_np = np.asarray(ts, dtype=float)
+    if ts_np.ndim != 1:
+        raise ValueError(f"ts must be a 1-D array of sample times, got shape {ts_np.shape}")
+    if ts_np.shape[0] < 2:
+        raise ValueError(f"too few samples: need at least 2 times, got {ts_np.shape[0]}")
+    if not np.all(np.isfinite(ts_np)):
+        bad = np.flatnonzero(~np.isfinite(ts_np))[:5].tolist()
+        raise ValueError(f"ts has non-finite entries at indices {bad}")
+    if np.any(np.diff(ts_np) <= 0):
+        i = int(np.flatnonzero(np.diff(ts_np) <= 0)[0])
+        raise ValueError(f"ts must be strictly increasing (ts[{i + 1}] <= ts[{i}])")
+    return jnp.asarray(ts_np, dtype=jnp.result_type(float))
+
+
+def _data(x, ts, width: int, name: str) -> jax.Array:
+    x_np = np.asarray(x, dtype=float)
+    if x_np.ndim != 2 or x_np.shape[1] != width:
+        raise ValueError(f"{name} must have shape (T, {width}), got {x_np.shape}")
+    if x_np.shape[0] != ts.shape[0]:
+        raise ValueError(
+            f"{name} has {x_np.shape[0]} samples but ts has {ts.shape[0]} times: they must match"
+        )
+    bad = ~np.all(np.isfinite(x_np), axis=1)
+    if bad.any():
+        raise ValueError(
+            f"{name} has NaN or inf at samples {np.flatnonzero(bad)[:5].tolist()}; "
+            "drop those samples (and their times)"
+        )
+    return jnp.asarray(x_np, dtype=jnp.result_type(float))
+
+
+def _sigma(sigma, ts, width: int) -> jax.Array:
+    s = np.asarray(sigma, dtype=float)
+    try:
+        s = np.broadcast_to(s, (ts.shape[0], width))
+    except ValueError:
+        raise ValueError(
+            f"sigma must broadcast to (T, {width}) = ({ts.shape[0]}, {width}), got shape {s.shape}"
+        ) from None
+    if not np.all(np.isfinite(s) & (s > 0)):
+        raise ValueError("sigma must be finite and > 0")
+    return jnp.asarray(s, dtype=jnp.result_type(float))
+
+
+def _unit_rows(x: jax.Array, name: str) -> jax.Array:
+    n = np.linalg.norm(np.asarray(x), axis=1)
+    if np.any(n <= 1e-12):
+        raise ValueError(
+            f"{name} has zero-length rows at samples {np.flatnonzero(n <= 1e-12)[:5].tolist()}"
+        )
+    return x / jnp.asarray(n)[:, None]
+
+
+# --------------------------------------------------------------------------- observations
+
+
+class _Observation(eqx.Module):
+    def loss(self, pred: Prediction) -> jax.Array:
+        """``()`` ``½ Σ r²``, the Gaussian negative log-likelihood up to a constant."""
+        r = self.residuals(pred)
+        return 0.5 * jnp.sum(r * r)
+
+    @property
+    def size(self) -> int:
+        """Number of residuals."""
+        raise NotImplementedError
+
+    def residuals(self, pred: Prediction) -> jax.Array:
+        raise NotImplementedError
+
+
+class Gyroscope(_Observation):
+    """A gyroscope record: angular velocity samples with Gaussian noise.
+
+    Attributes:
+        ts: ``(T,)`` strictly increasing times.
+        omega: ``(T, 3)`` measured angular velocity.
+        sigma: ``(T, 3)`` noise standard deviation (a scalar or ``(3,)`` broadcasts).
+        frame: static, the frame of ``omega``: ``"principal"`` (default; the body's
+            principal axes), ``"reference"`` (the frame the body's tensor was given in,
+            ``RigidBody.frame``) or ``"space"``.
+    """
+
+    ts: jax.Array
+    omega: jax.Array
+    sigma: jax.Array
+    frame: str = eqx.field(static=True)
+
+    def __init__(
+        self, ts: ArrayLike, omega: ArrayLike, sigma: ArrayLike = 1.0, *, frame: str = "principal"
+    ):
+        if frame not in _FRAMES:
+            raise ValueError(f"frame must be one of {_FRAMES}, got {frame!r}")
+        self.ts = _times(ts)
+        self.omega = _data(omega, self.ts, 3, "omega")
+        self.sigma = _sigma(sigma, self.ts, 3)
+        self.frame = frame
+
+    @property
+    def size(self) -> int:
+        return 3 * self.ts.shape[0]
+
+    def predicted(self, pred: Prediction) -> jax.Array:
+        """``(T, 3)`` angular velocity in this record's frame."""
+        if self.frame == "principal":
+            return pred.omega
+        if self.frame == "reference":
+            return quat.rotate(
+                jnp.broadcast_to(pred.frame, pred.omega.shape[:-1] + (4,)), pred.omega
+            )
+        if pred.q is None:
+            raise ValueError("a space-frame gyroscope needs a model that predicts q")
+        return quat.rotate(pred.q, pred.omega)
+
+    def residuals(self, pred: Prediction) -> jax.Array:
+        """``(3T,)`` whitened residuals ``(ω − ω̂)/σ``."""
+        return ((self.predicted(pred) - self.omega) / self.sigma).reshape(-1)
+
+
+class Orientations(_Observation):
+    """Orientation samples (quaternions, any sign, normalised here).
+
+    Attributes:
+        ts: ``(T,)`` times.
+        q: ``(T, 4)`` measured orientations, body → space.
+        sigma: ``(T, 3)`` angle noise in radians about each axis (scalar broadcasts).
+        frame: static, ``"principal"`` (default) or ``"reference"``: whose orientation
+            ``q`` is (the reference frame's is ``q_principal ⊗ frame*``).
+    """
+
+    ts: jax.Array
+    q: jax.Array
+    sigma: jax.Array
+    frame: str = eqx.field(static=True)
+
+    def __init__(
+        self, ts: ArrayLike, q: ArrayLike, sigma: ArrayLike = 1.0, *, frame: str = "principal"
+    ):
+        if frame not in _FRAMES[:2]:
+            raise ValueError(f"frame must be 'principal' or 'reference', got {frame!r}")
+        self.ts = _times(ts)
+        self.q = _unit_rows(_data(q, self.ts, 4, "q"), "q")
+        self.sigma = _sigma(sigma, self.ts, 3)
+        self.frame = frame
+
+    @property
+    def size(self) -> int:
+        return 3 * self.ts.shape[0]
+
+    def predicted(self, pred: Prediction) -> jax.Array:
+        """``(T, 4)`` predicted orientation of this record's frame."""
+        if pred.q is None:
+            raise ValueError("orientation observations need a model that predicts q")
+        if self.frame == "reference":
+            return quat.multiply(pred.q, quat.conjugate(jnp.broadcast_to(pred.frame, pred.q.shape)))
+        return pred.q
+
+    def residuals(self, pred: Prediction) -> jax.Array:
+        """``(3T,)`` whitened residuals ``2 sign(q̂·q) vec(q̂* ⊗ q)/σ``."""
+        return (_orientation_residual(self.predicted(pred), self.q) / self.sigma).reshape(-1)
+
+
+class AxisDirections(_Observation):
+    """Directions in space of one body-fixed axis (a camera tracking a mark).
+
+    Attributes:
+        ts: ``(T,)`` times.
+        directions: ``(T, 3)`` measured directions in space (normalised here).
+        sigma: ``(T, 3)`` noise per component (scalar broadcasts).
+        axis: ``(3,)`` the marked axis in principal body coordinates (an int ``i`` means
+            principal axis ``i + 1``); normalised.
+    """
+
+    ts: jax.Array
+    directions: jax.Array
+    sigma: jax.Array
+    axis: jax.Array
+
+    def __init__(self, ts: ArrayLike, directions: ArrayLike, sigma: ArrayLike = 1.0, *, axis=2):
+        self.ts = _times(ts)
+        self.directions = _unit_rows(_data(directions, self.ts, 3, "directions"), "directions")
+        self.sigma = _sigma(sigma, self.ts, 3)
+        if isinstance(axis, int):
+            if axis not in (0, 1, 2):
+                raise ValueError(f"axis must be 0, 1, 2 or a 3-vector, got {axis}")
+            axis = np.eye(3)[axis]
+        a = np.asarray(axis, dtype=float)
+        if a.shape != (3,) or not np.all(np.isfinite(a)) or not np.linalg.norm(a) > 0:
+            raise ValueError(f"axis must be a finite non-zero 3-vector, got {a.tolist()}")
+        self.axis = jnp.asarray(a / np.linalg.norm(a), dtype=jnp.result_type(float))
+
+    @property
+    def size(self) -> int:
+        return 3 * self.ts.shape[0]
+
+    def predicted(self, pred: Prediction) -> jax.Array:
+        """``(T, 3)`` predicted direction of the axis in space."""
+        if pred.q is None:
+            raise ValueError("axis observations need a model that predicts q")
+        return quat.rotate(pred.q, jnp.broadcast_to(self.axis, pred.q.shape[:-1] + (3,)))
+
+    def residuals(self, pred: Prediction) -> jax.Array:
+        """``(3T,)`` whitened residuals ``(R a − û)/σ``."""
+        return ((self.predicted(pred) - self.directions) / self.sigma).reshape(-1)

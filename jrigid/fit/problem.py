@@ -1,0 +1,183 @@
+"""Forward models and the :class:`Problem` that ties parameters to observations.
+
+A *forward model* maps a parameter pytree ``theta`` and times ``ts (T,)`` (``ts[0]`` the
+initial time) to a :class:`~jrigid.fit.observations.Prediction`. Both models here take a
+user function ``build(theta) -> (Scene, State)`` that uses the maps of
+:mod:`jrigid.fit.params` to keep the scene physical:
+
+- :class:`Simulated` — :func:`jrigid.simulate.simulate` (any scene: tops, torques);
+- :class:`Exact` — the closed-form torque-free solution :func:`jrigid.exact.solve`
+  (``FreeRotation`` scenes without loads only; much faster, no step control).
+
+:class:`Problem` evaluates the model once on the sorted union of the observation times
+and the initial time ``t0``, and stacks the whitened residuals of every observation.
+Its :meth:`Problem.loss` is ``½ Σ r²``. Models and problems are ``equinox`` modules
+(the builder and solver options static, the data traced), so two problems that differ
+only in their data share one compiled fit.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jrigid import exact
+from jrigid.fit.observations import Prediction, _Observation
+from jrigid.scene import FreeRotation, Scene
+from jrigid.simulate import simulate
+from jrigid.state import State
+
+__all__ = ["Exact", "Problem", "Simulated"]
+
+
+def _built(build, theta) -> tuple[Scene, State]:
+    out = build(theta)
+    if not (
+        isinstance(out, tuple)
+        and len(out) == 2
+        and isinstance(out[0], Scene)
+        and isinstance(out[1], State)
+    ):
+        raise ValueError("build(theta) must return (Scene, State)")
+    return out
+
+
+class Simulated(eqx.Module):
+    """Forward model through :func:`jrigid.simulate.simulate`.
+
+    Args:
+        build: ``theta -> (Scene, State)``; the state is at ``ts[0]``.
+        **simulate_kwargs: passed on (``formulation``, ``solver``, ``rtol``, ``atol``,
+            ``max_steps``, ``adjoint``...). ``rtol``/``atol`` default to ``1e-10``/``1e-12``
+            in float64 so that finite-difference checks of gradients are meaningful.
+            ``throw`` defaults to ``False``: a failed integration (e.g. at a wild trial
+            point of a line search) yields ``NaN`` residuals, which optax's line search
+            rejects, instead of aborting the fit.
+
+    Calling ``model(theta, ts, forward_mode=True)`` swaps the adjoint for
+    ``diffrax.ForwardMode()`` (needed by ``jax.jacfwd``, used by :func:`jrigid.fit.laplace`).
+    """
+
+    build: Callable[[Any], tuple[Scene, State]] = eqx.field(static=True)
+    kwargs: dict = eqx.field(static=True)
+
+    def __init__(self, build: Callable[[Any], tuple[Scene, State]], **simulate_kwargs):
+        self.build = build
+        kw = dict(simulate_kwargs)
+        kw.setdefault("throw", False)
+        if jnp.dtype(jnp.result_type(float)).itemsize >= 8:
+            kw.setdefault("rtol", 1e-10)
+            kw.setdefault("atol", 1e-12)
+        self.kwargs = kw
+
+    def __call__(self, theta, ts, *, forward_mode: bool = False) -> Prediction:
+        scene, state = _built(self.build, theta)
+        kw = dict(self.kwargs)
+        if forward_mode:
+            kw["adjoint"] = diffrax.ForwardMode()
+        traj = simulate(scene, state, ts, **kw)
+        return Prediction(traj.q, traj.omega, scene.body.frame)
+
+
+class Exact(eqx.Module):
+    """Forward model through the closed-form torque-free solution :func:`jrigid.exact.solve`.
+
+    Args:
+        build: ``theta -> (Scene, State)`` with a :class:`~jrigid.scene.FreeRotation`
+            scene and no loads; the state is at ``ts[0]``.
+    """
+
+    build: Callable[[Any], tuple[Scene, State]] = eqx.field(static=True)
+
+    def __init__(self, build: Callable[[Any], tuple[Scene, State]]):
+        self.build = build
+
+    def __call__(self, theta, ts, *, forward_mode: bool = False) -> Prediction:
+        scene, state = _built(self.build, theta)
+        if not isinstance(scene.holder, FreeRotation) or scene.loads:
+            raise ValueError(
+                "the Exact model is for torque-free FreeRotation scenes without loads; "
+                "use Simulated"
+            )
+        q, omega = exact.solve(scene.body.moments, state.q, state.omega, ts - ts[0])
+        return Prediction(q, omega, scene.body.frame)
+
+
+class Problem(eqx.Module):
+    """Observations of one motion and the model that predicts them.
+
+    Args:
+        model: a forward model (:class:`Simulated`, :class:`Exact` or any callable
+            ``(theta, ts, *, forward_mode) -> Prediction``).
+        observations: one observation or a sequence of them.
+        t0: the time of the initial state (default: the earliest observation time).
+            Every observation time must be ``≥ t0``.
+
+    Raises:
+        ValueError: no observations, an observation that is not one, or observation
+            times before ``t0``.
+    """
+
+    model: Any
+    observations: tuple
+    t0: jax.Array
+    ts: jax.Array
+    index: tuple
+
+    def __init__(self, model, observations: _Observation | Sequence[_Observation], *, t0=None):
+        if isinstance(observations, _Observation):
+            observations = (observations,)
+        observations = tuple(observations)
+        if not observations:
+            raise ValueError("Problem needs at least one observation")
+        for obs in observations:
+            if not isinstance(obs, _Observation):
+                raise ValueError(
+                    f"observations must be Gyroscope, Orientations or AxisDirections, got {obs!r}"
+                )
+        all_ts = np.concatenate([np.asarray(o.ts) for o in observations])
+        t0 = float(all_ts.min()) if t0 is None else float(t0)
+        if not np.isfinite(t0):
+            raise ValueError(f"t0 must be finite, got {t0}")
+        if all_ts.min() < t0:
+            raise ValueError(
+                f"observation times start at {all_ts.min():.6g}, before the initial time "
+                f"t0={t0:.6g}: the times do not match the model"
+            )
+        grid = np.unique(np.concatenate([[t0], all_ts]))
+        self.model = model
+        self.observations = observations
+        self.t0 = jnp.asarray(t0, dtype=jnp.result_type(float))
+        self.ts = jnp.asarray(grid, dtype=jnp.result_type(float))
+        self.index = tuple(
+            jnp.asarray(np.searchsorted(grid, np.asarray(o.ts))) for o in observations
+        )
+
+    @property
+    def size(self) -> int:
+        """Total number of residuals."""
+        return sum(o.size for o in self.observations)
+
+    def predict(self, theta, *, forward_mode: bool = False) -> Prediction:
+        """The model's :class:`Prediction` on the union time grid ``self.ts``."""
+        return self.model(theta, self.ts, forward_mode=forward_mode)
+
+    def residuals(self, theta, *, forward_mode: bool = False) -> jax.Array:
+        """``(N,)`` whitened residuals of all observations, concatenated."""
+        pred = self.predict(theta, forward_mode=forward_mode)
+        parts = []
+        for obs, idx in zip(self.observations, self.index, strict=True):
+            sub = Prediction(None if pred.q is None else pred.q[idx], pred.omega[idx], pred.frame)
+            parts.append(obs.residuals(sub))
+        return jnp.concatenate(parts)
+
+    def loss(self, theta) -> jax.Array:
+        """``()`` ``½ Σ r²`` (negative log-likelihood up to a constant)."""
+        r = self.residuals(theta)
+        return 0.5 * jnp.sum(r * r)

@@ -1,0 +1,310 @@
+"""jrigid.fit: losses and their gradients, recovery, Laplace error bars, bad observations."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from jrigid import exact, fit, initial
+from jrigid.body import RigidBody
+from jrigid.scene import Scene
+
+TRUE_MOMENTS = jnp.array([1.0, 2.0, 2.5]) / 5.5  # trace 1
+TRUE_OMEGA0 = jnp.array([0.3, 2.0, 0.2])  # near the intermediate axis: tumbling
+TRUE_Q0 = jnp.asarray(Rotation.from_euler("ZXZ", [0.3, 0.7, -0.2]).as_quat(scalar_first=True))
+
+
+def build(theta):
+    """Torque-free body: moment ratios (trace 1), initial spin, initial orientation."""
+    body = RigidBody(fit.moment_ratios(theta["shape"]))
+    q0 = fit.unit_quaternion(theta["q0"]) if "q0" in theta else None
+    return Scene(body), initial.from_omega(q0, theta["omega0"])
+
+
+def truth(with_q0=False):
+    theta = {"shape": fit.moment_ratios_raw(TRUE_MOMENTS), "omega0": TRUE_OMEGA0}
+    if with_q0:
+        theta["q0"] = TRUE_Q0
+    return theta
+
+
+def truth_arrays():
+    return TRUE_MOMENTS, TRUE_Q0, TRUE_OMEGA0
+
+
+def gyro_record(ts, sigma, seed):
+    """Exact torque-free ω(t) (closed form, independent of the integrator), plus noise."""
+    _, om = exact.solve(TRUE_MOMENTS, TRUE_Q0, TRUE_OMEGA0, ts)
+    rng = np.random.default_rng(seed)
+    return np.asarray(om) + sigma * rng.standard_normal(om.shape)
+
+
+# --------------------------------------------------------------------------- plain losses
+
+
+def test_orientation_loss_sign_invariant_and_is_sin2_half_angle():
+    a = Rotation.from_rotvec([0.2, -0.4, 0.9])
+    rel = Rotation.from_rotvec([0.0, 0.5, 0.0])  # 0.5 rad apart
+    q = jnp.asarray(a.as_quat(scalar_first=True))[None]
+    q_obs = jnp.asarray((a * rel).as_quat(scalar_first=True))[None]
+    expected = np.sin(0.25) ** 2
+    np.testing.assert_allclose(fit.orientation_loss(q, q_obs), expected, rtol=1e-12)
+    np.testing.assert_allclose(fit.orientation_loss(q, -q_obs), expected, rtol=1e-12)
+    assert float(fit.orientation_loss(q, -q)) < 1e-15
+    # residual form: |r|² σ²/4 = 1 - (q·q̂)²
+    obs = fit.Orientations([0.0, 1.0], np.concatenate([-q_obs, q_obs]), sigma=0.1)
+    pred = fit.Prediction(jnp.concatenate([q, q]), jnp.zeros((2, 3)), jnp.array([1.0, 0, 0, 0]))
+    r = obs.residuals(pred).reshape(2, 3)
+    np.testing.assert_allclose(jnp.sum(r * r, axis=1) * 0.01 / 4, [expected] * 2, rtol=1e-12)
+
+
+def test_gyroscope_and_axis_losses_values():
+    om = jnp.array([[1.0, 2.0, 3.0]])
+    assert float(fit.gyroscope_loss(om, om + 0.2, 0.1)) == pytest.approx(0.5 * 3 * 4)
+    u = jnp.array([[1.0, 0.0, 0.0]])
+    v = jnp.array([[0.0, 1.0, 0.0]])
+    assert float(fit.axis_loss(u, v, 1.0)) == pytest.approx(1.0)
+
+
+# --------------------------------------------------------------------------- gradients
+
+
+def _central_fd(f, flat, h):
+    cols = []
+    for i in range(flat.shape[0]):
+        e = jnp.zeros_like(flat).at[i].set(h)
+        cols.append((f(flat + e) - f(flat - e)) / (2 * h))
+    return jnp.stack(cols, axis=-1)
+
+
+def test_every_loss_gradient_matches_finite_differences():
+    """∂(loss)/∂θ through ``simulate`` against central differences, rel 1e-6.
+
+    (The closed-form model's gradients are exercised by the recovery tests.)"""
+    ts = jnp.linspace(0.0, 2.0, 9)
+    q, om = exact.solve(TRUE_MOMENTS, TRUE_Q0, TRUE_OMEGA0, ts)
+    rng = np.random.default_rng(0)
+    observations = [
+        fit.Gyroscope(ts, np.asarray(om) + 0.05 * rng.standard_normal(om.shape), sigma=0.05),
+        fit.Orientations(ts, np.asarray(q)[:, [0, 2, 1, 3]], sigma=0.1),  # perturbed data
+        fit.AxisDirections(ts, np.tile([0.1, 0.2, 1.0], (9, 1)), sigma=0.1, axis=2),
+    ]
+    problem = fit.Problem(fit.Simulated(build, rtol=1e-12, atol=1e-14), observations)
+    theta = truth(with_q0=True)
+    theta = {k: v * 1.03 for k, v in theta.items()}  # off the optimum
+    flat, unravel = jax.flatten_util.ravel_pytree(theta)
+
+    def losses(x):
+        pred = problem.predict(unravel(x))
+        out = []
+        for obs, idx in zip(problem.observations, problem.index, strict=True):
+            sub = fit.Prediction(pred.q[idx], pred.omega[idx], pred.frame)
+            out.append(obs.loss(sub))
+        return jnp.stack(out)
+
+    grad = jax.jit(jax.jacrev(losses))(flat)
+    fd = _central_fd(jax.jit(losses), flat, 1e-5)
+    assert bool(jnp.all(jnp.abs(grad) > 0))  # every parameter matters to every loss
+    np.testing.assert_allclose(grad, fd, rtol=1e-6, atol=1e-6 * float(jnp.max(jnp.abs(fd))))
+    # the problem's total loss is the sum of the parts
+    np.testing.assert_allclose(problem.loss(theta), jnp.sum(losses(flat)), rtol=1e-12)
+
+
+# --------------------------------------------------------------------------- recovery
+
+
+def _fit_problem(model, ts, omega_obs, sigma):
+    return fit.Problem(model, fit.Gyroscope(ts, omega_obs, sigma=sigma))
+
+
+START = {"shape": jnp.array([0.5, 0.5]), "omega0": jnp.array([0.4, 1.9, 0.3])}
+
+
+def test_noise_free_recovery_exact_model():
+    ts = jnp.linspace(0.0, 8.0, 41)
+    problem = _fit_problem(fit.Exact(build), ts, gyro_record(ts, 0.0, 0), 0.01)
+    res = fit.fit(problem, START, max_iter=300, gtol=1e-10)
+    assert res.converged, res.reason
+    np.testing.assert_allclose(fit.moment_ratios(res.params["shape"]), TRUE_MOMENTS, atol=1e-6)
+    np.testing.assert_allclose(res.params["omega0"], TRUE_OMEGA0, atol=1e-6)
+    # history: one entry per iterate, loss decreasing overall
+    assert len(res.history["loss"]) == res.n_iter + 1 == len(res.history["params"])
+    assert res.history["loss"][-1] < 1e-8 * res.history["loss"][0]
+
+
+def test_noise_free_recovery_through_simulate():
+    ts = jnp.linspace(0.0, 3.0, 13)
+    problem = _fit_problem(
+        fit.Simulated(build, rtol=1e-11, atol=1e-13), ts, gyro_record(ts, 0.0, 0), 0.01
+    )
+    res = fit.fit(problem, START, max_iter=300, gtol=1e-9)
+    assert res.converged, res.reason
+    np.testing.assert_allclose(fit.moment_ratios(res.params["shape"]), TRUE_MOMENTS, atol=1e-6)
+    np.testing.assert_allclose(res.params["omega0"], TRUE_OMEGA0, atol=1e-6)
+
+
+def test_noisy_truth_within_three_sigma():
+    """Seeded noisy record: every estimate within 3σ of the truth, χ² plausible."""
+    ts = jnp.linspace(0.0, 8.0, 41)
+    sigma = 0.02
+    problem = _fit_problem(fit.Exact(build), ts, gyro_record(ts, sigma, 1), sigma)
+    res = fit.fit(problem, START, max_iter=300, gtol=1e-10)
+    assert res.converged, res.reason
+    lap = fit.laplace(problem, res.params)
+    assert lap.rank == 5 and lap.dof == 3 * 41 - 5
+    assert abs(lap.chi2 - lap.dof) < 5 * np.sqrt(2 * lap.dof)
+    m, m_sigma = fit.propagate(lambda p: fit.moment_ratios(p["shape"]), lap)
+    assert bool(jnp.all(m_sigma > 0))
+    assert bool(jnp.all(jnp.abs(m - TRUE_MOMENTS) < 3 * m_sigma)), (m - TRUE_MOMENTS, m_sigma)
+    dw = jnp.abs(res.params["omega0"] - TRUE_OMEGA0)
+    assert bool(jnp.all(dw < 3 * lap.sigma["omega0"])), (dw, lap.sigma["omega0"])
+    assert "±" in lap.summary()
+
+
+def test_laplace_matches_linear_regression():
+    """For a model linear in θ, (JᵀJ)⁻¹ is the ordinary least-squares covariance."""
+    ts = jnp.linspace(0.0, 1.0, 7)
+
+    def model(theta, t, forward_mode=False):
+        om = theta["a"][None, :] + t[:, None] * theta["b"][None, :]
+        return fit.Prediction(None, om, jnp.array([1.0, 0.0, 0.0, 0.0]))
+
+    obs = fit.Gyroscope(ts, np.zeros((7, 3)), sigma=0.3)
+    lap = fit.laplace(fit.Problem(model, obs), {"a": jnp.ones(3), "b": jnp.ones(3)})
+    x = np.stack([np.ones(7), np.asarray(ts)], axis=1)
+    cov = 0.09 * np.linalg.inv(x.T @ x)
+    np.testing.assert_allclose(lap.sigma["a"], np.sqrt(cov[0, 0]) * np.ones(3), rtol=1e-10)
+    np.testing.assert_allclose(lap.sigma["b"], np.sqrt(cov[1, 1]) * np.ones(3), rtol=1e-10)
+
+
+# --------------------------------------------------------------------------- driver
+
+
+def _quadratic(p):
+    return jnp.sum((p["x"] - jnp.arange(3.0)) ** 2 * jnp.array([1.0, 10.0, 100.0]))
+
+
+@pytest.mark.parametrize("method", ["lbfgs", "adam"])
+def test_driver_methods_and_stopping(method):
+    kw = dict(learning_rate=0.05) if method == "adam" else {}
+    res = fit.fit(_quadratic, {"x": jnp.zeros(3)}, method=method, max_iter=3000, gtol=1e-7, **kw)
+    assert res.converged and res.reason in ("gtol", "ftol")
+    np.testing.assert_allclose(res.params["x"], [0.0, 1.0, 2.0], atol=1e-5)
+    short = fit.fit(_quadratic, {"x": jnp.zeros(3)}, method=method, max_iter=2, **kw)
+    assert short.reason == "max_iter" and not short.converged and short.n_iter == 2
+
+
+def test_driver_progress_bar(capsys):
+    res = fit.fit(_quadratic, {"x": jnp.zeros(3)}, max_iter=100, progress=True)
+    assert res.converged
+    assert "fit (lbfgs)" in capsys.readouterr().err
+
+
+def test_driver_errors():
+    with pytest.raises(ValueError, match="method"):
+        fit.fit(_quadratic, {"x": jnp.zeros(3)}, method="newton")
+    with pytest.raises(ValueError, match="max_iter"):
+        fit.fit(_quadratic, {"x": jnp.zeros(3)}, max_iter=0)
+    with pytest.raises(ValueError, match="not finite"):
+        fit.fit(lambda p: jnp.sum(p["x"]) * jnp.nan, {"x": jnp.zeros(3)})
+
+
+# --------------------------------------------------------------------------- bad observations
+
+
+@pytest.mark.parametrize(
+    "make, match",
+    [
+        (lambda: fit.Gyroscope(np.arange(5.0), np.full((5, 3), np.nan)), "NaN"),
+        (lambda: fit.Gyroscope(np.arange(5.0), np.zeros((5, 4))), r"shape \(T, 3\)"),
+        (lambda: fit.Gyroscope(np.arange(5.0), np.zeros((4, 3))), "must match"),
+        (lambda: fit.Gyroscope([0.0], np.zeros((1, 3))), "too few samples"),
+        (lambda: fit.Gyroscope(np.zeros((2, 2)), np.zeros((2, 3))), "1-D"),
+        (lambda: fit.Gyroscope([0.0, 2.0, 1.0], np.zeros((3, 3))), "strictly increasing"),
+        (lambda: fit.Gyroscope([0.0, np.nan], np.zeros((2, 3))), "non-finite"),
+        (lambda: fit.Gyroscope(np.arange(3.0), np.zeros((3, 3)), sigma=0.0), "sigma"),
+        (lambda: fit.Gyroscope(np.arange(3.0), np.zeros((3, 3)), sigma=np.ones(4)), "sigma"),
+        (lambda: fit.Gyroscope(np.arange(3.0), np.zeros((3, 3)), frame="lab"), "frame"),
+        (lambda: fit.Orientations(np.arange(3.0), np.zeros((3, 4))), "zero-length"),
+        (lambda: fit.Orientations(np.arange(3.0), np.zeros((3, 3))), r"shape \(T, 4\)"),
+        (lambda: fit.AxisDirections(np.arange(3.0), np.ones((3, 3)), axis=3), "axis"),
+        (lambda: fit.AxisDirections(np.arange(3.0), np.full((3, 3), np.inf)), "NaN or inf"),
+        (
+            lambda: fit.Problem(
+                fit.Exact(build), fit.Gyroscope([0.0, 1.0], np.zeros((2, 3))), t0=0.5
+            ),
+            "before the initial time",
+        ),
+        (lambda: fit.Problem(fit.Exact(build), []), "at least one observation"),
+        (lambda: fit.Problem(fit.Exact(build), [np.zeros(3)]), "observations must be"),
+    ],
+)
+def test_bad_observations_raise_clear_errors(make, match):
+    with pytest.raises(ValueError, match=match):
+        make()
+
+
+def test_union_time_grid_and_t0():
+    a = fit.Gyroscope([0.5, 1.0, 2.0], np.zeros((3, 3)))
+    b = fit.AxisDirections([1.0, 1.5], np.ones((2, 3)))
+    problem = fit.Problem(fit.Exact(build), [a, b], t0=0.0)
+    np.testing.assert_array_equal(problem.ts, [0.0, 0.5, 1.0, 1.5, 2.0])
+    np.testing.assert_array_equal(problem.ts[problem.index[1]], [1.0, 1.5])
+    assert problem.size == 15
+
+
+def test_reference_and_space_frames_against_scipy():
+    """Gyroscope and orientation records in the reference / space frame (scipy rotations)."""
+    rng = np.random.default_rng(3)
+    frame = Rotation.random(random_state=4)
+    qs = Rotation.random(3, random_state=5)
+    om = rng.standard_normal((3, 3))
+    pred = fit.Prediction(
+        jnp.asarray(qs.as_quat(scalar_first=True)),
+        jnp.asarray(om),
+        jnp.asarray(frame.as_quat(scalar_first=True)),
+    )
+    ts = [0.0, 1.0, 2.0]
+    ref = fit.Gyroscope(ts, np.zeros((3, 3)), frame="reference").predicted(pred)
+    np.testing.assert_allclose(ref, frame.apply(om), atol=1e-12)
+    space = fit.Gyroscope(ts, np.zeros((3, 3)), frame="space").predicted(pred)
+    np.testing.assert_allclose(space, qs.apply(om), atol=1e-12)
+    q_ref = fit.Orientations(ts, np.ones((3, 4)), frame="reference").predicted(pred)
+    expected = (qs * frame.inv()).as_quat(scalar_first=True)
+    np.testing.assert_allclose(np.abs(np.sum(np.asarray(q_ref) * expected, axis=1)), 1.0)
+    axis = fit.AxisDirections(ts, np.ones((3, 3)), axis=[1.0, 1.0, 0.0]).predicted(pred)
+    np.testing.assert_allclose(axis, qs.apply(np.array([1.0, 1.0, 0.0]) / np.sqrt(2)), atol=1e-12)
+
+
+def test_laplace_raw_quaternion_has_one_null_direction():
+    """The norm of a raw quaternion is unobservable: rank P − 1, σ of the angle finite."""
+    ts = jnp.linspace(0.0, 1.0, 5)
+    q_true = jnp.asarray(Rotation.from_rotvec([0.3, -0.2, 0.5]).as_quat(scalar_first=True))
+
+    def model(theta, t, forward_mode=False):
+        q = jnp.broadcast_to(fit.unit_quaternion(theta["q"]), (t.shape[0], 4))
+        return fit.Prediction(q, jnp.zeros((t.shape[0], 3)), jnp.array([1.0, 0.0, 0.0, 0.0]))
+
+    obs = fit.Orientations(ts, np.tile(np.asarray(q_true), (5, 1)), sigma=0.01)
+    lap = fit.laplace(fit.Problem(model, obs), {"q": 2.0 * q_true})
+    assert lap.rank == 3
+    # rotation-vector error of one axis: 5 samples of σ = 0.01 → σ/√5 per component
+    _, s = fit.propagate(lambda p: fit.unit_quaternion(p["q"])[1:], lap)
+    np.testing.assert_allclose(
+        np.sqrt(np.sum(np.asarray(s) ** 2)), 0.5 * 0.01 / np.sqrt(5) * np.sqrt(3), rtol=0.3
+    )
+
+
+def test_float32_fit_recovers(float32):
+    ts = jnp.linspace(0.0, 8.0, 41)
+    m32, q32, w32 = (jnp.asarray(np.asarray(x), jnp.float32) for x in truth_arrays())
+    _, om = exact.solve(m32, q32, w32, ts)
+    problem = _fit_problem(fit.Exact(build), ts, om, 0.01)
+    start = {"shape": jnp.array([0.5, 0.5]), "omega0": jnp.array([0.4, 1.9, 0.3])}
+    res = fit.fit(problem, start, max_iter=300, gtol=1e-4)
+    assert res.params["omega0"].dtype == jnp.float32
+    m = fit.moment_ratios(res.params["shape"])
+    np.testing.assert_allclose(m, np.asarray(TRUE_MOMENTS, np.float32), atol=2e-5)
+    np.testing.assert_allclose(res.params["omega0"], np.asarray(TRUE_OMEGA0), atol=2e-5)
+    assert fit.laplace(problem, res.params).rank == 5
