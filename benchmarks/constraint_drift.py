@@ -29,8 +29,8 @@ jax.config.update("jax_enable_x64", True)
 from jrigid.body import RigidBody  # noqa: E402
 from jrigid.formulations import QuaternionAcceleration  # noqa: E402
 from jrigid.initial import from_omega  # noqa: E402
+from jrigid.integrate import simulate  # noqa: E402
 from jrigid.scene import Scene  # noqa: E402
-from jrigid.simulate import simulate  # noqa: E402
 
 
 def run(periods: float, rtol: float, atol: float, samples: int) -> list[dict]:

@@ -66,8 +66,8 @@ import harness  # noqa: E402
 from jrigid import quaternion as quat  # noqa: E402
 from jrigid.body import RigidBody  # noqa: E402
 from jrigid.initial import from_euler_rates, from_omega  # noqa: E402
+from jrigid.integrate import simulate  # noqa: E402
 from jrigid.scene import Gravity, Pivot, Scene  # noqa: E402
-from jrigid.simulate import simulate  # noqa: E402
 
 TARGETS = (1e-4, 1e-6, 1e-8, 1e-10)
 DEFAULT = "jrigid quaternion_acceleration + Tsit5"

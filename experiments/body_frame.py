@@ -26,9 +26,9 @@ import numpy as np
 
 from jrigid import demo, inertia, initial, viz
 from jrigid.body import RigidBody
+from jrigid.integrate import simulate
 from jrigid.report import Report
 from jrigid.scene import Scene
-from jrigid.simulate import simulate
 
 AXIS_NAMES = ("1 (smallest I)", "2 (intermediate I)", "3 (largest I)")
 

@@ -12,7 +12,7 @@ rates from inverting 17.36, which divides by ``sin θ``) and with quaternions (t
 * thrown through the vertical (``L_z = L·e3``, which lets the axle pass ``θ = 0``), the
   quaternion run goes through smoothly, while the Euler-angle run stops at gimbal lock:
   ``throw=False`` returns ``Result.gimbal_lock`` and the time reached; ``throw=True`` raises
-  :class:`jrigid.simulate.SimulationError` naming the cause.
+  :class:`jrigid.integrate.SimulationError` naming the cause.
 
 Run it with ``jrigid run euler_angle_gyroscope [--quick]``.
 """
@@ -28,8 +28,8 @@ import numpy as np
 
 from jrigid import initial, viz
 from jrigid import quaternion as quat
+from jrigid.integrate import Result, SimulationError, simulate
 from jrigid.report import Report
-from jrigid.simulate import Result, SimulationError, simulate
 
 try:
     from .gyroscope import run, steady_roots, top

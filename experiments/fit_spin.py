@@ -28,9 +28,9 @@ import numpy as np
 from jrigid import fit, initial
 from jrigid import quaternion as quat
 from jrigid.body import RigidBody
+from jrigid.integrate import simulate
 from jrigid.report import Report
 from jrigid.scene import Gravity, Pivot, Scene
-from jrigid.simulate import simulate
 
 MOMENTS = (0.25, 0.25, 0.4)
 

@@ -30,10 +30,10 @@ import numpy as np
 from jrigid import demo, inertia, initial, viz
 from jrigid import quaternion as quat
 from jrigid.body import RigidBody
+from jrigid.integrate import simulate
 from jrigid.leapfrog import leapfrog
 from jrigid.report import Report
 from jrigid.scene import Scene
-from jrigid.simulate import simulate
 
 
 def _angle_deg(a, b):

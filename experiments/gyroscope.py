@@ -35,9 +35,9 @@ import numpy as np
 
 from jrigid import demo, inertia, initial, viz
 from jrigid.body import RigidBody
+from jrigid.integrate import simulate
 from jrigid.report import Report
 from jrigid.scene import Gravity, Pivot, Scene
-from jrigid.simulate import simulate
 
 
 def top(radius: float = 1.0, z0: float = 1.0, g: float = 1.0) -> Scene:

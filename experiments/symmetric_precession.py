@@ -25,9 +25,9 @@ import numpy as np
 
 from jrigid import demo, initial, viz
 from jrigid.body import RigidBody
+from jrigid.integrate import simulate
 from jrigid.report import Report
 from jrigid.scene import Scene
-from jrigid.simulate import simulate
 
 
 def precession(moments, rate, alpha, periods, n):

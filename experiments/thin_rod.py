@@ -27,9 +27,9 @@ import numpy as np
 
 from jrigid import demo, inertia, initial, viz
 from jrigid.body import RigidBody
+from jrigid.integrate import simulate
 from jrigid.report import Report
 from jrigid.scene import Scene
-from jrigid.simulate import simulate
 
 
 def tumble(moments, omega0, n, periods=3.0):

@@ -6,51 +6,104 @@ Layers (imports point down the stack):
 - dynamics: :class:`RigidBody`, :class:`Scene` with holders (:class:`FreeRotation`,
   :class:`Pivot`, :class:`FreeFlight`) and loads (:class:`Gravity`, :class:`Torque`),
   :mod:`jrigid.initial` for initial conditions, :mod:`jrigid.formulations`
-- integration: :func:`simulate` (diffrax), :func:`leapfrog` (the chapter's stepper),
-  :mod:`jrigid.exact` (closed-form torque-free motion), :mod:`jrigid.special`
-- presentation: :mod:`jrigid.viz` (matplotlib; imported only on request), the ``jrigid``
-  command line
+- integration: :func:`simulate` (diffrax, in :mod:`jrigid.integrate`),
+  :mod:`jrigid.leapfrog` (the chapter's stepper), :mod:`jrigid.exact` (closed-form
+  torque-free motion) on :mod:`jrigid.special` (elliptic functions)
+- applications: :mod:`jrigid.fit`
+- presentation: :mod:`jrigid.viz` (matplotlib), the ``jrigid`` command line
 
-``import jrigid`` does not import matplotlib.
+Names and submodules load on first use, so ``import jrigid`` imports neither JAX nor
+matplotlib until something needs them (``jrigid list`` stays instant).
 """
 
-from jrigid import affine, inertia, initial, quaternion
-from jrigid.body import RigidBody
-from jrigid.formulations import (
-    BodyOmega,
-    EulerAngles,
-    QuaternionAcceleration,
-    QuaternionOmega,
-)
-from jrigid.leapfrog import leapfrog
-from jrigid.scene import FreeFlight, FreeRotation, Gravity, Pivot, Scene, Torque
-from jrigid.simulate import Result, SimulationError, simulate
-from jrigid.state import Kinematics, State
-from jrigid.trajectory import Trajectory
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
 
 __version__ = "0.1.0"
 
-__all__ = [
-    "BodyOmega",
-    "EulerAngles",
-    "FreeFlight",
-    "FreeRotation",
-    "Gravity",
-    "Kinematics",
-    "Pivot",
-    "QuaternionAcceleration",
-    "QuaternionOmega",
-    "Result",
-    "RigidBody",
-    "Scene",
-    "SimulationError",
-    "State",
-    "Torque",
-    "Trajectory",
+_EXPORTS = {
+    "RigidBody": "jrigid.body",
+    "BodyOmega": "jrigid.formulations",
+    "EulerAngles": "jrigid.formulations",
+    "QuaternionAcceleration": "jrigid.formulations",
+    "QuaternionOmega": "jrigid.formulations",
+    "FreeFlight": "jrigid.scene",
+    "FreeRotation": "jrigid.scene",
+    "Gravity": "jrigid.scene",
+    "Pivot": "jrigid.scene",
+    "Scene": "jrigid.scene",
+    "Torque": "jrigid.scene",
+    "Kinematics": "jrigid.state",
+    "State": "jrigid.state",
+    "Trajectory": "jrigid.trajectory",
+    "Result": "jrigid.integrate",
+    "SimulationError": "jrigid.integrate",
+    "simulate": "jrigid.integrate",
+}
+_SUBMODULES = (
     "affine",
+    "body",
+    "exact",
+    "fit",
+    "formulations",
     "inertia",
     "initial",
+    "integrate",
     "leapfrog",
     "quaternion",
-    "simulate",
-]
+    "scene",
+    "special",
+    "state",
+    "trajectory",
+    "viz",
+)
+
+__all__ = sorted([*_EXPORTS, *_SUBMODULES])
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        value = getattr(importlib.import_module(_EXPORTS[name]), name)
+    elif name in _SUBMODULES:
+        value = importlib.import_module(f"jrigid.{name}")
+    else:
+        raise AttributeError(f"module 'jrigid' has no attribute {name!r}")
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_EXPORTS, *_SUBMODULES])
+
+
+if TYPE_CHECKING:
+    from jrigid import (  # noqa: F401
+        affine,
+        body,
+        exact,
+        fit,
+        formulations,
+        inertia,
+        initial,
+        integrate,
+        leapfrog,
+        quaternion,
+        scene,
+        special,
+        state,
+        trajectory,
+        viz,
+    )
+    from jrigid.body import RigidBody  # noqa: F401
+    from jrigid.formulations import (  # noqa: F401
+        BodyOmega,
+        EulerAngles,
+        QuaternionAcceleration,
+        QuaternionOmega,
+    )
+    from jrigid.integrate import Result, SimulationError, simulate  # noqa: F401
+    from jrigid.scene import FreeFlight, FreeRotation, Gravity, Pivot, Scene, Torque  # noqa: F401
+    from jrigid.state import Kinematics, State  # noqa: F401
+    from jrigid.trajectory import Trajectory  # noqa: F401

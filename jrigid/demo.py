@@ -52,9 +52,9 @@ import numpy as np
 from jrigid import inertia, initial, viz
 from jrigid import quaternion as quat
 from jrigid.body import RigidBody
+from jrigid.integrate import simulate
 from jrigid.report import Report, format_number
 from jrigid.scene import Scene
-from jrigid.simulate import simulate
 from jrigid.viz import shapes
 
 __all__ = [

@@ -30,8 +30,8 @@ from jax.typing import ArrayLike
 
 from jrigid import quaternion as quat
 from jrigid.formulations import AbstractFormulation
+from jrigid.integrate import Result, _guard, _normalised, prepare, problems, validate
 from jrigid.scene import Scene, _solve3
-from jrigid.simulate import Result, _guard, _normalised, prepare, problems, validate
 from jrigid.state import Kinematics, State
 from jrigid.trajectory import Trajectory
 

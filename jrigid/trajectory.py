@@ -58,7 +58,7 @@ class Trajectory(eqx.Module):
             the space frame (or ``None``).
         x, v: ``(T, 3)`` centre-of-mass position and velocity (free flight), else ``None``.
         stats: dict with ``num_steps``, ``num_accepted_steps``, ``num_rejected_steps``.
-        result: ``()`` int, a :class:`jrigid.simulate.Result` code (0 = success).
+        result: ``()`` int, a :class:`jrigid.integrate.Result` code (0 = success).
             Values at times after a failure are ``inf``/``NaN``.
         t_stop: ``()`` the time the integration reached (``ts[-1]`` on success).
         scene: the simulated :class:`~jrigid.scene.Scene`.

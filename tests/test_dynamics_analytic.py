@@ -14,8 +14,8 @@ from scipy.spatial.transform import Rotation
 
 from jrigid import initial
 from jrigid.body import RigidBody
+from jrigid.integrate import simulate
 from jrigid.scene import Gravity, Pivot, Scene
-from jrigid.simulate import simulate
 
 N_OUT = 201
 

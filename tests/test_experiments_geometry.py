@@ -150,7 +150,7 @@ def test_euler_angles_singularity(results):
     np.testing.assert_allclose(g["theta_0"]["to_euler_deg"], ref, atol=1e-9)
     first, middle, third = g["theta_pi"]["to_euler_deg"]
     assert first == pytest.approx(phi - psi, abs=1e-9) and third == 0.0
-    assert middle == pytest.approx(180.0, abs=1e-9)  # scipy's value; the middle angle lies in [0, π]
+    assert middle == pytest.approx(180.0, abs=1e-9)  # scipy: the middle angle is in [0, π]
     for case in ("theta_0", "theta_pi"):
         assert g[case]["round_trip_distance"] < EXACT  # the rotation itself is kept
     assert g["theta_1e-9"]["round_trip_distance"] < 2e-9  # O(θ) when θ is snapped to lock

@@ -14,9 +14,9 @@ from scipy.stats import linregress
 from jrigid import initial
 from jrigid.body import RigidBody
 from jrigid.formulations import EulerAngles
+from jrigid.integrate import Result, SimulationError, simulate
 from jrigid.leapfrog import leapfrog
 from jrigid.scene import FreeFlight, Gravity, Pivot, Scene, Torque
-from jrigid.simulate import Result, SimulationError, simulate
 from jrigid.state import State
 
 N_OUT = 201  # shared with test_dynamics_analytic so compiled solves are reused

@@ -400,8 +400,8 @@ def test_trajectory_from_simulate_is_drawn(tmp_path):
     jnp = pytest.importorskip("jax.numpy")
     from jrigid import inertia, initial
     from jrigid.body import RigidBody
+    from jrigid.integrate import simulate
     from jrigid.scene import Scene
-    from jrigid.simulate import simulate
 
     moments = inertia.box(1.0, 1.0, 0.6, 0.3)
     # 401 samples, as `jrigid demo --quick`: the compiled solve is shared within a session

@@ -5,7 +5,7 @@ initial time) to a :class:`~jrigid.fit.observations.Prediction`. Both models her
 user function ``build(theta) -> (Scene, State)`` that uses the maps of
 :mod:`jrigid.fit.params` to keep the scene physical:
 
-- :class:`Simulated` — :func:`jrigid.simulate.simulate` (any scene: tops, torques);
+- :class:`Simulated` — :func:`jrigid.simulate` (any scene: tops, torques);
 - :class:`Exact` — the closed-form torque-free solution :func:`jrigid.exact.solve`
   (``FreeRotation`` scenes without loads only; much faster, no step control).
 
@@ -29,8 +29,8 @@ import numpy as np
 
 from jrigid import exact
 from jrigid.fit.observations import Prediction, _Observation
+from jrigid.integrate import simulate
 from jrigid.scene import FreeRotation, Scene
-from jrigid.simulate import simulate
 from jrigid.state import State
 
 __all__ = ["Exact", "Problem", "Simulated"]
@@ -49,7 +49,7 @@ def _built(build, theta) -> tuple[Scene, State]:
 
 
 class Simulated(eqx.Module):
-    """Forward model through :func:`jrigid.simulate.simulate`.
+    """Forward model through :func:`jrigid.simulate`.
 
     Args:
         build: ``theta -> (Scene, State)``; the state is at ``ts[0]``.

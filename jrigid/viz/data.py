@@ -2,7 +2,7 @@
 
 Every drawing function in :mod:`jrigid.viz` accepts ``data`` as either
 
-* an object with attributes (a :class:`jrigid.simulate.Trajectory` or anything alike), or
+* an object with attributes (a :class:`jrigid.integrate.Trajectory` or anything alike), or
 * a mapping of plain arrays, e.g. ``{"ts": ts, "q": q, "omega": omega}``.
 
 Recognised names (first found wins): times ``ts``/``t``; orientation ``q`` ``(T, 4)``
