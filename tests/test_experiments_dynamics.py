@@ -10,13 +10,11 @@ worst; the tolerances below are set by the measurement (sampling, line fits, nut
 justified where it is used.
 """
 
-import json
 import math
 
 import numpy as np
 import pytest
-
-from jrigid import cli, registry
+from _experiments import assert_listed_and_written, run_quick
 
 NAMES = (
     "dzhanibekov",
@@ -33,21 +31,12 @@ NAMES = (
 @pytest.fixture(scope="module")
 def results(tmp_path_factory):
     """name -> (numbers, out_dir), each experiment run once in quick mode."""
-    out = {}
-    for name in NAMES:
-        folder = tmp_path_factory.mktemp(name)
-        assert cli.main(["run", name, "--quick", "--out", str(folder)]) == 0
-        out[name] = (json.loads((folder / "numbers.json").read_text()), folder)
-    return out
+    return run_quick(tmp_path_factory, NAMES)
 
 
 @pytest.mark.parametrize("name", NAMES)
 def test_listed_and_writes_outputs(name, results):
-    exp = registry.discover()[name]
-    assert exp.summary and exp.summary != "(no description)"
-    _, folder = results[name]
-    assert (folder / "report.md").is_file() and (folder / "run.json").is_file()
-    assert list(folder.glob("*.png")), "no figure written"
+    assert_listed_and_written(name, results)
 
 
 # --------------------------------------------------------------------------- 16. dzhanibekov

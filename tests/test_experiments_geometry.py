@@ -8,15 +8,15 @@ a handful of operations, so "exact" claims are checked to 1e-12 (a few thousand 
 tight enough to catch any wrong formula, loose enough for roundoff.
 """
 
-import json
 import math
 
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _experiments import assert_listed_and_written, run_quick
 from scipy.spatial.transform import Rotation
 
-from jrigid import cli, registry
+from jrigid import registry
 
 NAMES = ("affine_2d", "affine_3d", "methane", "euler_angles", "quaternion_rotation", "fixed_axle")
 EXACT = 1e-12  # see the module docstring
@@ -25,21 +25,12 @@ EXACT = 1e-12  # see the module docstring
 @pytest.fixture(scope="module")
 def results(tmp_path_factory):
     """name -> (numbers, out_dir), each experiment run once in quick mode."""
-    out = {}
-    for name in NAMES:
-        folder = tmp_path_factory.mktemp(name)
-        assert cli.main(["run", name, "--quick", "--out", str(folder)]) == 0
-        out[name] = (json.loads((folder / "numbers.json").read_text()), folder)
-    return out
+    return run_quick(tmp_path_factory, NAMES)
 
 
 @pytest.mark.parametrize("name", NAMES)
 def test_listed_and_writes_outputs(name, results):
-    exp = registry.discover()[name]
-    assert exp.summary and exp.summary != "(no description)"
-    _, folder = results[name]
-    assert (folder / "report.md").is_file() and (folder / "run.json").is_file()
-    assert list(folder.glob("*.png")), "no figure written"
+    assert_listed_and_written(name, results)
 
 
 # --------------------------------------------------------------------------- 1. affine_2d

@@ -1,0 +1,24 @@
+"""Shared harness for the experiment tests: run each quick mode once, check its outputs."""
+
+import json
+
+from jrigid import cli, registry
+
+
+def run_quick(tmp_path_factory, names) -> dict:
+    """``name -> (numbers, out_dir)``: each experiment run once via ``jrigid run --quick``."""
+    out = {}
+    for name in names:
+        folder = tmp_path_factory.mktemp(name)
+        assert cli.main(["run", name, "--quick", "--out", str(folder)]) == 0
+        out[name] = (json.loads((folder / "numbers.json").read_text()), folder)
+    return out
+
+
+def assert_listed_and_written(name, results) -> None:
+    """The experiment is listed with a description and wrote a report, run record and figure."""
+    exp = registry.discover()[name]
+    assert exp.summary and exp.summary != "(no description)"
+    _, folder = results[name]
+    assert (folder / "report.md").is_file() and (folder / "run.json").is_file()
+    assert list(folder.glob("*.png")), "no figure written"
