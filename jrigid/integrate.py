@@ -35,6 +35,14 @@ Step counts are in ``Trajectory.stats``.
 
 Adjoints: ``RecursiveCheckpointAdjoint`` (default, reverse mode) and
 ``diffrax.ForwardMode()`` (for ``jax.jacfwd``) work; ``BacksolveAdjoint`` does not.
+
+``solver="exact"`` skips the integration for a torque-free scene and evaluates the
+closed-form motion of :mod:`jrigid.exact` at ``ts`` (plus the ballistic parabola of the
+centre of mass under uniform gravity in free flight). The closed-form ``q`` and ``ω`` are
+converted to the formulation's variables with ``formulation.from_state`` and the
+:class:`~jrigid.trajectory.Trajectory` is built as for the numerical path; ``rtol``,
+``atol``, ``max_steps``, ``dt0``, ``adjoint`` and ``project`` are ignored, the step
+counts are zero. It works under ``jit``, ``vmap`` and ``grad``.
 """
 
 from __future__ import annotations
@@ -47,13 +55,22 @@ import jax
 import jax.numpy as jnp
 from jax.typing import ArrayLike
 
+from jrigid import exact
+from jrigid import quaternion as quat
 from jrigid._checks import is_traced
 from jrigid.formulations import AbstractFormulation, get_formulation
-from jrigid.scene import Scene
+from jrigid.scene import FreeFlight, FreeRotation, Gravity, Scene
 from jrigid.state import State
 from jrigid.trajectory import Trajectory
 
-__all__ = ["ProjectedSolver", "Result", "SimulationError", "simulate"]
+__all__ = [
+    "ExactMotion",
+    "ProjectedSolver",
+    "Result",
+    "SimulationError",
+    "check_exact_scene",
+    "simulate",
+]
 
 
 class Result(enum.IntEnum):
@@ -383,6 +400,86 @@ def _solve(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoint, max_
         interpolation=sol.interpolation,
     )
 
+# --------------------------------------------------------------------------- exact
+
+
+def check_exact_scene(scene: Scene) -> None:
+    """Raise ``ValueError`` unless ``scene`` is torque free, as ``solver="exact"`` needs.
+
+    Allowed: a :class:`~jrigid.scene.FreeRotation` or :class:`~jrigid.scene.FreeFlight`
+    holder whose loads are only :class:`~jrigid.scene.Gravity` (no torque about the
+    centre of mass; in free flight the centre of mass follows a parabola).
+    """
+    names = ", ".join(type(load).__name__ for load in scene.loads)
+    holder = type(scene.holder).__name__
+    if not isinstance(scene.holder, (FreeRotation, FreeFlight)):
+        if names:
+            what = f"needs a torque-free scene; this scene has a {holder} with {names}"
+        else:
+            what = (
+                "solves rotation about the centre of mass (FreeRotation or FreeFlight); "
+                f"this scene has a {holder} holder"
+            )
+        raise ValueError(f"solver='exact' {what}: use a diffrax solver")
+    others = [type(load).__name__ for load in scene.loads if not isinstance(load, Gravity)]
+    if others:
+        raise ValueError(
+            "solver='exact' needs a torque-free scene; this scene has a "
+            f"{holder} with {', '.join(others)} load(s): use a diffrax solver"
+        )
+
+
+class ExactMotion(eqx.Module):
+    """Closed-form motion of a torque-free scene as a dense output (``evaluate(t)``).
+
+    ``evaluate(t)`` returns the formulation's state at time ``t``: ``q, ω`` from
+    :func:`jrigid.exact.evaluate` and, in free flight, ``x = x0 + v0 Δt + ½ g Δt²``,
+    ``v = v0 + g Δt`` with ``Δt = t − t0`` and ``g`` the sum of the scene's gravity fields.
+    """
+
+    consts: exact.ExactConstants
+    t0: jax.Array
+    x0: jax.Array | None
+    v0: jax.Array | None
+    scene: Scene
+    formulation: AbstractFormulation = eqx.field(static=True)
+
+    def evaluate(self, t):
+        dt = t - self.t0
+        q, omega = exact.evaluate(self.consts, dt)
+        x = v = None
+        if self.scene.translates:
+            g = jnp.zeros(3, dtype=dt.dtype)
+            for load in self.scene.loads:
+                g = g + load.g
+            x = self.x0 + dt * self.v0 + (0.5 * dt * dt) * g
+            v = self.v0 + dt * g
+        state = State(q, quat.derivative(q, omega), x, v)
+        return self.formulation.from_state(self.scene, state)
+
+
+@eqx.filter_jit
+def _solve_exact(scene, state, ts, rtol, atol, formulation, dense):
+    state, ts = _guard((state, ts), problems(formulation, scene, state, ts, rtol, atol))
+    scene = eqx.tree_at(lambda s: s.body, scene, scene.body.check())
+    state = _normalised(state)
+    consts = exact.prepare(scene.body.moments, state.q, state.omega)
+    motion = ExactMotion(consts, ts[0], state.x, state.v, scene, formulation)
+    ys = jax.vmap(motion.evaluate)(ts)
+    result = jnp.where(_all_finite(ys), Result.success, Result.nonfinite).astype(jnp.int32)
+    zero = jnp.zeros((), jnp.int32)
+    stats = dict(num_steps=zero, num_accepted_steps=zero, num_rejected_steps=zero)
+    return Trajectory.build(
+        scene,
+        formulation,
+        ts,
+        ys,
+        stats=stats,
+        result=result,
+        t_stop=ts[-1],
+        interpolation=motion if dense else None,
+    )
+
 
 def simulate(
     scene: Scene,
@@ -390,7 +487,7 @@ def simulate(
     ts: ArrayLike,
     *,
     formulation: str | AbstractFormulation = "quaternion_acceleration",
-    solver: diffrax.AbstractSolver | None = None,
+    solver: diffrax.AbstractSolver | str | None = None,
     rtol: ArrayLike | None = None,
     atol: ArrayLike | None = None,
     max_steps: int = 100_000,
@@ -412,7 +509,11 @@ def simulate(
         formulation: name (``"quaternion_acceleration"`` default, ``"quaternion_omega"``,
             ``"body_omega"``, ``"euler_angles"``) or a formulation object (e.g.
             ``QuaternionAcceleration(stabilization=1.0)``).
-        solver: any diffrax solver; default ``diffrax.Tsit5()``.
+        solver: any diffrax solver; default ``diffrax.Tsit5()``. Or ``"exact"``: the
+            closed-form solution (:mod:`jrigid.exact`) for torque-free scenes only
+            (:func:`check_exact_scene`); then ``rtol``, ``atol``, ``max_steps``, ``dt0``,
+            ``adjoint`` and ``project`` are ignored, ``stats`` are zero, and
+            ``dense=True`` keeps the closed form for :meth:`Trajectory.at`.
         rtol, atol: PID tolerances, traced (changing them does not recompile). Defaults
             ``1e-8`` and ``1e-10`` (float64), ``1e-5`` and ``1e-7`` (float32).
             ``rtol`` must be finite, ``> 0`` and at least ``10 eps``.
@@ -429,10 +530,22 @@ def simulate(
 
     Raises:
         ValueError: bad input (non-physical inertia, zero quaternion, NaN state,
-            impossible tolerances, a scene the formulation cannot represent, ...).
+            impossible tolerances, a scene the formulation cannot represent,
+            ``solver="exact"`` for a scene with a torque, ...).
         SimulationError: a failed integration, when ``throw`` and values are concrete.
     """
     formulation = get_formulation(formulation)
+    if isinstance(solver, str):
+        if solver != "exact":
+            raise ValueError(f"solver must be a diffrax solver or 'exact', got {solver!r}")
+        state, ts, rtol, atol = prepare(
+            scene, initial_state, ts, None, None, jnp.result_type(float)
+        )
+        check_exact_scene(scene)
+        formulation.check_scene(scene)
+        validate(formulation, scene, state, ts, rtol, atol)
+        traj = _solve_exact(scene, state, ts, rtol, atol, formulation, bool(dense))
+        return _raise_on_failure(traj, throw, ts, rtol, atol, max_steps)
     solver = diffrax.Tsit5() if solver is None else solver
     if not isinstance(solver, diffrax.AbstractSolver):
         raise ValueError(f"solver must be a diffrax solver, got {solver!r}")
@@ -452,6 +565,11 @@ def simulate(
         scene, state, ts, rtol, atol, dt0,
         formulation, solver, adjoint, max_steps, project, bool(dense),
     )
+    return _raise_on_failure(traj, throw, ts, rtol, atol, max_steps)
+
+
+def _raise_on_failure(traj, throw, ts, rtol, atol, max_steps):
+    """Apply ``throw`` (see :func:`simulate`) to a solved trajectory."""
     if not throw:
         return traj
     if is_traced(traj.result):
