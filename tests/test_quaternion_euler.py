@@ -5,6 +5,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _rotations import assert_same_rotation
 from hypothesis import given, settings
 from scipy.spatial.transform import Rotation
 
@@ -22,11 +23,6 @@ def singular_middles(seq):
     return (0.0, np.pi) if is_symmetric(seq) else (np.pi / 2, -np.pi / 2)
 
 
-def assert_same_rotation(q1, q2, atol=1e-12):
-    q1, q2 = np.asarray(q1), np.asarray(q2)
-    assert q1.shape == q2.shape
-    d = np.minimum(np.abs(q1 - q2).max(axis=-1), np.abs(q1 + q2).max(axis=-1))
-    assert np.all(d <= atol), d.max()
 
 
 def angle_diff(a, b):
