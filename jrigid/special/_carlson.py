@@ -83,6 +83,19 @@ def _rf_sqrt(sx, sy, sz):
     return poly / jnp.sqrt(a)
 
 
+def _rd_rj_series(e2, e3, e4, e5):
+    """The truncated series shared by R_D and R_J (Carlson 1995, eqs. 2.7 and 2.19)."""
+    return (
+        1.0
+        - 3.0 * e2 / 14.0
+        + e3 / 6.0
+        + 9.0 * e2 * e2 / 88.0
+        - 3.0 * e4 / 22.0
+        - 9.0 * e2 * e3 / 52.0
+        + 3.0 * e5 / 26.0
+    )
+
+
 def _rd_sqrt(sx, sy, sz):
     """``R_D(sx², sy², sz²)``; ``sz > 0`` and at most one of ``sx, sy`` zero."""
     x, y, z = sx * sx, sy * sy, sz * sz
@@ -116,15 +129,7 @@ def _rd_sqrt(sx, sy, sz):
     e3 = (3.0 * xy - 8.0 * z2) * zz
     e4 = 3.0 * (xy - z2) * z2
     e5 = xy * z2 * zz
-    poly = (
-        1.0
-        - 3.0 * e2 / 14.0
-        + e3 / 6.0
-        + 9.0 * e2 * e2 / 88.0
-        - 3.0 * e4 / 22.0
-        - 9.0 * e2 * e3 / 52.0
-        + 3.0 * e5 / 26.0
-    )
+    poly = _rd_rj_series(e2, e3, e4, e5)
     return scale * poly / (a * jnp.sqrt(a)) + 3.0 * acc
 
 
@@ -164,15 +169,7 @@ def _rj_sqrt(sx, sy, sz, sp, steps=_STEPS_RJ):
     e3 = xyz + 2.0 * e2 * pp + 4.0 * p2 * pp
     e4 = (2.0 * xyz + e2 * pp + 3.0 * p2 * pp) * pp
     e5 = xyz * p2
-    poly = (
-        1.0
-        - 3.0 * e2 / 14.0
-        + e3 / 6.0
-        + 9.0 * e2 * e2 / 88.0
-        - 3.0 * e4 / 22.0
-        - 9.0 * e2 * e3 / 52.0
-        + 3.0 * e5 / 26.0
-    )
+    poly = _rd_rj_series(e2, e3, e4, e5)
     return scale * poly / (a * jnp.sqrt(a)) + 6.0 * acc
 
 
