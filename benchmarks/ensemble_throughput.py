@@ -1,0 +1,511 @@
+"""Ensemble throughput: trajectories per second over a map of initial ω directions.
+
+Problem: an asymmetric free rotor, principal moments (1, 2, 3), started at the identity
+orientation with body angular velocity ``ω0 = |ω| d`` for ``N`` directions ``d`` on a
+Fibonacci sphere (N = 10⁴; ``--quick``: 10³), ``|ω| = 1``, integrated over 50 rotation
+periods ``T = 50 · 2π/|ω|``. Each member keeps its final ``q`` and ``ω``.
+
+Methods (all measured in the same run):
+
+- **jrigid Tsit5**: :func:`jrigid.ensemble.simulate_many` (``simulate`` under ``vmap``,
+  in chunks of 1000 members, each chunk sharded over every device JAX sees), default
+  formulation with projection, ``rtol = 1e-8``, ``atol = 1e-10``. By default the script
+  forces one XLA host device per usable core (``XLA_FLAGS``, set before JAX is imported;
+  ``--devices`` changes it), so the CPU cores are used the way GPUs would be. The full
+  mode also times the same run on one device, and ``formulation="quaternion_omega"``
+  with ``diffrax.Dopri8()`` (the fastest jrigid choice at tight tolerances in
+  ``speed_vs_error.py``; order 8 like scipy's DOP853).
+- **jrigid exact**: the same with ``solver="exact"`` (closed form, no steps).
+- **scipy DOP853 loop**: ``solve_ivp`` member after member on the same equations (Euler's
+  equations and ``q̇ = ½ q ⊗ (0, ω)``, plain Python right-hand side), at the same
+  ``rtol``/``atol`` and at the loosest ``rtol`` whose median error still matches
+  jrigid Tsit5's. Timed on an evenly spread subset of the map (200 members; quick: 20)
+  and scaled to N.
+- **MuJoCo RK4**: ``mujoco.rollout.rollout`` (MuJoCo's batched C rollout, one ``MjData``
+  per usable core as its thread pool), a body with a free joint and diagonal inertia
+  (1, 2, 3), zero gravity, ``integrator="RK4"``, time step ``T/nstep``. The step is
+  chosen for matched error: the median errors over the subset at two trial steps
+  (RK4 converges as ``h⁴``) give the largest step whose median error equals jrigid
+  Tsit5's on the same members (plus a 3% margin); the error at that step is measured.
+  Timed on the same subset as scipy and scaled. The rollout stores the state after
+  every step (its API has no sub-sampling); a preallocated buffer is reused.
+
+Errors: per member, the worst of the relative final ω error and the sign-invariant final
+``q`` error (as ``harness.omega_error``/``quaternion_error``) against ``jrigid.exact``;
+the closed form itself is checked against scipy DOP853 at ``rtol = 1e-13`` on a few
+members (printed as the reference's error). Compile times are reported on their own;
+throughputs exclude them. jrigid Tsit5 (whole map), scipy and MuJoCo (subset) are timed
+in two interleaved rounds (``harness.time_interleaved``; median), so that load from other
+processes falls on all three alike; the other jrigid rows are one run each. The load
+average at start and end is recorded: the machine may be shared.
+
+Usage::
+
+    python benchmarks/ensemble_throughput.py            # full, N = 10⁴, a few minutes
+    python benchmarks/ensemble_throughput.py --quick    # N = 10³, about 30-40 s
+
+Writes ``ensemble_throughput[_quick].json`` and ``.md`` to ``benchmarks/results/``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import pathlib
+import sys
+import time
+
+
+def _usable_cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def _parse(argv):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="N = 1000 directions, ~30-40 s")
+    parser.add_argument("--n", type=int, default=None, help="number of directions")
+    parser.add_argument("--subset", type=int, default=None, help="members timed for scipy/MuJoCo")
+    parser.add_argument("--devices", type=int, default=None,
+                        help="XLA host devices to force (default: usable cores)")
+    parser.add_argument("--out", default=None, help="output directory (default benchmarks/results)")
+    return parser.parse_args(argv)
+
+
+ARGS = _parse(None if __name__ == "__main__" else [])
+if "jax" not in sys.modules and "xla_force_host_platform_device_count" not in os.environ.get(
+    "XLA_FLAGS", ""
+):
+    os.environ["XLA_FLAGS"] = (
+        os.environ.get("XLA_FLAGS", "")
+        + f" --xla_force_host_platform_device_count={ARGS.devices or _usable_cores()}"
+    ).strip()
+
+import jax  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+from scipy.integrate import solve_ivp  # noqa: E402
+
+jax.config.update("jax_enable_x64", True)
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+
+import harness  # noqa: E402
+
+from jrigid import ensemble, initial  # noqa: E402
+from jrigid.body import RigidBody  # noqa: E402
+from jrigid.scene import Scene  # noqa: E402
+
+MOMENTS = (1.0, 2.0, 3.0)
+OMEGA = 1.0
+PERIODS = 50
+T1 = PERIODS * 2.0 * np.pi / OMEGA
+RTOL, ATOL = 1e-8, 1e-10
+CHUNK = 1000
+TARGET_SPEEDUP_SCIPY = 100.0
+
+
+# --------------------------------------------------------------------------- problem
+
+
+def fibonacci_sphere(n: int) -> np.ndarray:
+    """``(n, 3)`` unit vectors spread evenly over the sphere (golden-angle spiral)."""
+    i = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * i / n
+    r = np.sqrt(1.0 - z * z)
+    phi = np.pi * (3.0 - np.sqrt(5.0)) * i
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+
+
+def member_errors(q, omega, q_ref, omega_ref) -> np.ndarray:
+    """Per member: max(relative ω error, sign-invariant q error), as in ``harness``."""
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    q_ref = q_ref / np.linalg.norm(q_ref, axis=-1, keepdims=True)
+    eq = np.minimum(np.linalg.norm(q - q_ref, axis=-1), np.linalg.norm(q + q_ref, axis=-1))
+    ew = np.linalg.norm(omega - omega_ref, axis=-1) / np.linalg.norm(omega_ref, axis=-1)
+    return np.maximum(eq, ew)
+
+
+def stats(err: np.ndarray) -> dict:
+    return {
+        "median": float(np.median(err)),
+        "p90": float(np.quantile(err, 0.9)),
+        "max": float(np.max(err)),
+    }
+
+
+# --------------------------------------------------------------------------- jrigid
+
+
+def final_state(traj):
+    return {"q": traj.q[-1], "omega": traj.omega[-1], "steps": traj.stats["num_steps"],
+            "result": traj.result}
+
+
+def jrigid_run(omegas: np.ndarray, devices, **kwargs) -> tuple[dict, dict]:
+    scene = Scene(RigidBody(jnp.asarray(MOMENTS)))
+    states = jax.vmap(lambda w: initial.from_omega(None, w))(jnp.asarray(omegas))
+    info: dict = {}
+    out = ensemble.simulate_many(
+        scene, states, np.array([0.0, T1]), summary=final_state, chunk_size=CHUNK,
+        progress=False, devices=devices, info=info, **kwargs,
+    )
+    return out, info
+
+
+def time_jrigid(label, omegas, devices, log, repeats=0, **kwargs) -> dict:
+    """Compile (first call), then time ``repeats`` calls; throughput from the median.
+
+    ``repeats=0``: the first call's time without its compile time.
+    """
+    start = time.perf_counter()
+    out, info = jrigid_run(omegas, devices, **kwargs)
+    first = time.perf_counter() - start
+    runs = [] if repeats else [info["run_seconds"]]  # first call minus its compile time
+    for _ in range(repeats):
+        start = time.perf_counter()
+        out, info2 = jrigid_run(omegas, devices, **kwargs)
+        runs.append(time.perf_counter() - start)
+        assert info2["compile_seconds"] == 0.0
+    seconds = float(np.median(runs))
+    n = omegas.shape[0]
+    log(f"  {label}: compile {info['compile_seconds']:.1f} s, run {seconds:.2f} s "
+        f"({n / seconds:.0f} trajectories/s; first call {first:.1f} s)")
+    return {
+        "label": label, "members_timed": n, "seconds": seconds, "runs": runs,
+        "compile_seconds": info["compile_seconds"], "throughput": n / seconds,
+        "n_devices": info["n_devices"], "out": out,
+    }
+
+
+# --------------------------------------------------------------------------- scipy
+
+
+def _rhs(t, y):
+    a, b, c, d, w0, w1, w2 = y
+    i1, i2, i3 = MOMENTS
+    return [
+        0.5 * (-b * w0 - c * w1 - d * w2),
+        0.5 * (a * w0 + c * w2 - d * w1),
+        0.5 * (a * w1 - b * w2 + d * w0),
+        0.5 * (a * w2 + b * w1 - c * w0),
+        (i2 - i3) * w1 * w2 / i1,
+        (i3 - i1) * w2 * w0 / i2,
+        (i1 - i2) * w0 * w1 / i3,
+    ]
+
+
+def scipy_loop(omegas: np.ndarray, rtol: float, atol: float) -> tuple[dict, float]:
+    q, w, steps = [], [], []
+    start = time.perf_counter()
+    for w0 in omegas:
+        sol = solve_ivp(_rhs, (0.0, T1), np.r_[1.0, 0.0, 0.0, 0.0, w0], method="DOP853",
+                        rtol=rtol, atol=atol)
+        q.append(sol.y[:4, -1])
+        w.append(sol.y[4:, -1])
+        steps.append(sol.t.shape[0] - 1)
+    seconds = time.perf_counter() - start
+    return {"q": np.array(q), "omega": np.array(w), "steps": np.array(steps)}, seconds
+
+
+# --------------------------------------------------------------------------- MuJoCo
+
+MJ_XML = """
+<mujoco model="free rotor">
+  <option gravity="0 0 0" integrator="RK4" timestep="0.01"/>
+  <worldbody>
+    <body name="rotor">
+      <freejoint/>
+      <inertial pos="0 0 0" mass="1" diaginertia="{} {} {}"/>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+
+
+def mujoco_rollout(omegas: np.ndarray, nstep: int, threads: int) -> tuple[dict, float]:
+    """Final q, ω after ``nstep`` RK4 steps of ``T1/nstep`` with ``mujoco.rollout``."""
+    import mujoco
+    from mujoco import rollout
+
+    model = mujoco.MjModel.from_xml_string(MJ_XML.format(*MOMENTS))
+    model.opt.timestep = T1 / nstep
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    size = mujoco.mj_stateSize(model, spec)
+    data = mujoco.MjData(model)
+    init = np.zeros((omegas.shape[0], size))
+    for i, w0 in enumerate(omegas):
+        mujoco.mj_resetData(model, data)
+        data.qpos[3:7] = (1.0, 0.0, 0.0, 0.0)
+        data.qvel[3:6] = w0  # free joint: angular velocity in the body frame
+        mujoco.mj_getState(model, data, init[i], spec)
+    datas = [mujoco.MjData(model) for _ in range(threads)]
+    group = max(1, min(omegas.shape[0], int(2e8 // (nstep * size * 8))))
+    buf = np.empty((group, nstep, size))
+    final = np.empty_like(init)
+    start = time.perf_counter()
+    for lo in range(0, omegas.shape[0], group):
+        part = init[lo:lo + group]
+        out = buf[: part.shape[0]]
+        rollout.rollout(model, datas, part, nstep=nstep, state=out)
+        final[lo:lo + part.shape[0]] = out[:, -1]
+    seconds = time.perf_counter() - start
+    qpos = 1
+    qvel = 1 + model.nq
+    t_end = final[:, 0]
+    assert np.allclose(t_end, T1, rtol=1e-9), t_end[:3]
+    return {"q": final[:, qpos + 3:qpos + 7], "omega": final[:, qvel + 3:qvel + 6]}, seconds
+
+
+def mujoco_matched_step(omegas, ref_q, ref_w, target, threads, log) -> tuple[int, list]:
+    """``nstep`` whose median error matches ``target`` (RK4: error ∝ h⁴), from two trials."""
+    trials = []
+    for nstep in (4000, 8000):
+        out, _ = mujoco_rollout(omegas, nstep, threads)
+        err = float(np.median(member_errors(out["q"], out["omega"], ref_q, ref_w)))
+        trials.append({"nstep": nstep, "median_error": err})
+        log(f"  MuJoCo calibration: nstep {nstep}, median error {err:.3g}")
+    (n0, e0), (n1, e1) = [(t["nstep"], t["median_error"]) for t in trials]
+    order = np.log(e0 / e1) / np.log(n1 / n0)
+    nstep = int(np.ceil(1.03 * n1 * (e1 / target) ** (1.0 / order)))  # 3% margin
+    return max(nstep, 1), trials + [{"fitted_order": float(order)}]
+
+
+# --------------------------------------------------------------------------- report
+
+
+def fmt_rate(x: float) -> str:
+    return f"{x:,.0f}" if x >= 100 else f"{x:.3g}"
+
+
+def report(res: dict) -> str:
+    n = res["n"]
+    rows = []
+    base = res["methods"]["jrigid Tsit5"]["throughput"]
+    for label, m in res["methods"].items():
+        err = m.get("errors", {})
+        rows.append([
+            label,
+            m["setting"],
+            f"{m['members_timed']:,}" + (" (scaled)" if m["members_timed"] < n else ""),
+            fmt_rate(m["throughput"]),
+            harness.fmt_seconds(n / m["throughput"]),
+            f"{err['median']:.2g} / {err['max']:.2g}" if err else "—",
+            "—" if m.get("compile_seconds") is None else f"{m['compile_seconds']:.1f} s",
+            f"{base / m['throughput']:.3g}×",
+        ])
+    table = harness.markdown_table(
+        ["method", "setting", "members timed", "trajectories/s", f"time for {n:,}",
+         "error median / max", "compile", "jrigid Tsit5 speed-up over it"],
+        rows,
+    )
+    v = res["verdict"]
+    lines = [
+        f"# Ensemble throughput: {n:,} ω directions, 50 rotation periods"
+        + (" (quick)" if res["quick"] else ""),
+        "",
+        f"Machine: {res['machine_line']}",
+        f"Load average at start {res['machine']['load_average']}, at end "
+        f"{res['machine']['load_average_end']}. XLA devices: {res['n_devices']} "
+        f"(forced host devices). Total run time {res['total_seconds']:.0f} s.",
+        "",
+        f"Asymmetric free rotor, moments {MOMENTS}, |ω| = {OMEGA}, q0 = identity, "
+        f"T = 50·2π/|ω| = {T1:.2f}; errors (final q and ω, worst of the two per member) "
+        "against jrigid.exact; scipy and MuJoCo timed on an evenly spread subset and scaled "
+        f"to {n:,}. The reference (jrigid.exact) agrees with scipy DOP853 at rtol 1e-13 to "
+        f"{res['reference_check']:.2g} on {res['reference_members']} members. jrigid Tsit5, "
+        "scipy and MuJoCo were timed in two interleaved rounds (median); the other jrigid "
+        "rows in one run each.",
+        "",
+        table,
+        "",
+        f"- jrigid Tsit5 steps per member: median {res['steps']['median']:.0f}, max "
+        f"{res['steps']['max']:.0f}; useful work under vmap (steps needed / steps executed "
+        f"in lockstep, chunks of {CHUNK}) {res['steps']['lockstep_useful']:.0%}.",
+        f"- Target ≥ {TARGET_SPEEDUP_SCIPY:.0f}× a scipy DOP853 loop: Tsit5 "
+        f"{v['tsit5_vs_scipy_same_rtol']:.1f}× at the same rtol, "
+        f"{v['tsit5_vs_scipy_matched']:.1f}× at matched error — "
+        f"{'met' if v['tsit5_scipy_met'] else 'NOT met'} by Tsit5; the exact solver: "
+        f"{v['exact_vs_scipy']:.0f}× ({'met' if v['exact_scipy_met'] else 'not met'}).",
+        f"- Ahead of MuJoCo at equal error: Tsit5 {v['tsit5_vs_mujoco']:.1f}× "
+        f"({'met' if v['tsit5_vs_mujoco'] > 1 else 'NOT met'}; MuJoCo median error "
+        f"{v['mujoco_error']:.2g} against jrigid's {v['jrigid_error']:.2g}); exact "
+        f"{v['exact_vs_mujoco']:.0f}×.",
+    ]
+    alt = res["methods"].get("jrigid quaternion_omega + Dopri8")
+    if alt is not None:
+        scipy_same = res["methods"]["scipy DOP853 loop"]
+        mj = res["methods"]["MuJoCo RK4 rollout"]
+        lines.append(
+            f"- jrigid quaternion_omega + Dopri8 at the same rtol: "
+            f"{alt['throughput'] / scipy_same['throughput']:.1f}× the scipy DOP853 loop "
+            f"(median error {alt['errors']['median']:.2g} against scipy's "
+            f"{scipy_same['errors']['median']:.2g}), "
+            f"{alt['throughput'] / mj['throughput']:.1f}× MuJoCo (whose error is "
+            f"{mj['errors']['median'] / alt['errors']['median']:.2g}× larger)."
+        )
+    if "jrigid Tsit5, 1 device" in res["methods"]:
+        one = res["methods"]["jrigid Tsit5, 1 device"]["seconds"]
+        two = res["methods"]["jrigid Tsit5"]["first_run_seconds"]
+        lines.append(
+            f"- Sharding over {res['n_devices']} devices: {one / two:.2f}× the throughput of "
+            f"one device (single runs one after the other, {two:.1f} s against {one:.1f} s)."
+        )
+    return "\n".join(lines) + "\n"
+
+
+# --------------------------------------------------------------------------- main
+
+
+def main() -> dict:
+    args = ARGS
+    start_all = time.perf_counter()
+    log = lambda *a: print(*a, flush=True)  # noqa: E731
+    machine = harness.machine_info()
+    mline = harness.machine_line(machine)
+    log(mline)
+    n = args.n or (1000 if args.quick else 10_000)
+    m = args.subset or (20 if args.quick else 200)
+    threads = _usable_cores()
+    omegas = OMEGA * fibonacci_sphere(n)
+    pick = np.linspace(0, n - 1, min(m, n)).round().astype(int)
+    devices = jax.devices()
+    log(f"{n} directions, {len(devices)} XLA devices, subset of {pick.size} for scipy/MuJoCo")
+
+    # reference: jrigid.exact (closed form), checked against scipy at rtol 1e-13
+    log("jrigid exact (also the reference):")
+    exact_m = time_jrigid("jrigid exact", omegas, devices, log, repeats=3, solver="exact")
+    ref_q, ref_w = exact_m["out"]["q"], exact_m["out"]["omega"]
+    few = pick[:: max(1, pick.size // 5)][:5]
+    tight, _ = scipy_loop(omegas[few], 1e-13, 1e-15)
+    ref_check = float(np.max(member_errors(tight["q"], tight["omega"], ref_q[few], ref_w[few])))
+    log(f"  reference check against scipy DOP853 rtol 1e-13: {ref_check:.2g}")
+    exact_m["errors"] = {"median": ref_check, "max": ref_check}
+    exact_m["setting"] = "closed form (error: vs scipy rtol 1e-13)"
+
+    log("jrigid Tsit5:")
+    tsit = time_jrigid("jrigid Tsit5", omegas, devices, log, rtol=RTOL, atol=ATOL)
+    out = tsit["out"]
+    assert np.all(out["result"] == 0), "some members failed"
+    err_all = member_errors(out["q"], out["omega"], ref_q, ref_w)
+    tsit["errors"] = stats(err_all)
+    tsit["setting"] = f"rtol {RTOL:g}, atol {ATOL:g}, {len(devices)} devices"
+    steps = out["steps"].astype(float)
+    chunks = [steps[i:i + CHUNK] for i in range(0, n, CHUNK)]
+    useful = steps.sum() / sum(c.max() * c.size for c in chunks)
+    methods = {"jrigid Tsit5": tsit, "jrigid exact": exact_m}
+    if not args.quick and len(devices) > 1:
+        one = time_jrigid("jrigid Tsit5, 1 device", omegas, devices[:1], log, rtol=RTOL,
+                          atol=ATOL)
+        one["errors"] = stats(member_errors(one["out"]["q"], one["out"]["omega"], ref_q, ref_w))
+        one["setting"] = f"rtol {RTOL:g}, atol {ATOL:g}, 1 device"
+        methods["jrigid Tsit5, 1 device"] = one
+
+    if not args.quick:
+        import diffrax
+
+        alt = time_jrigid("jrigid quaternion_omega + Dopri8", omegas, devices, log, rtol=RTOL,
+                          atol=ATOL, formulation="quaternion_omega", solver=diffrax.Dopri8())
+        alt["errors"] = stats(member_errors(alt["out"]["q"], alt["out"]["omega"], ref_q, ref_w))
+        alt["setting"] = f"rtol {RTOL:g}, atol {ATOL:g}, {len(devices)} devices"
+        methods["jrigid quaternion_omega + Dopri8"] = alt
+
+    # scipy: same tolerance, and the loosest tolerance matching jrigid's median error
+    sub_w, sub_q, sub_ref_w = omegas[pick], ref_q[pick], ref_w[pick]
+    jr_sub = float(np.median(err_all[pick]))
+    log(f"scipy DOP853 loop ({pick.size} members), jrigid median error on them {jr_sub:.3g}:")
+    cal = pick[:: max(1, pick.size // 12)]  # evenly spread (the map is ordered by height)
+    matched_rtol = RTOL
+    for rtol in (1e-7, 1e-6, 1e-5):
+        o, _ = scipy_loop(omegas[cal], rtol, rtol * 1e-2)
+        e = float(np.median(member_errors(o["q"], o["omega"], ref_q[cal], ref_w[cal])))
+        log(f"  calibration rtol {rtol:g}: median error {e:.3g} (jrigid on these "
+            f"{np.median(err_all[cal]):.3g})")
+        if e > np.median(err_all[cal]):
+            break
+        matched_rtol = rtol
+    # MuJoCo RK4 at matched error
+    import mujoco
+
+    log(f"MuJoCo {mujoco.__version__} rollout, RK4, {threads} threads:")
+    nstep, trials = mujoco_matched_step(sub_w, sub_q, sub_ref_w, jr_sub, threads, log)
+
+    # jrigid (whole map), scipy and MuJoCo (subset) timed in interleaved rounds
+    rounds = 2
+    calls = {
+        "jrigid Tsit5": lambda: jrigid_run(omegas, devices, rtol=RTOL, atol=ATOL)[0],
+        "scipy DOP853 loop": lambda: scipy_loop(sub_w, RTOL, ATOL)[0],
+    }
+    if matched_rtol != RTOL:
+        calls["scipy DOP853 loop, matched error"] = (
+            lambda: scipy_loop(sub_w, matched_rtol, matched_rtol * 1e-2)[0]
+        )
+    calls["MuJoCo RK4 rollout"] = lambda: mujoco_rollout(sub_w, nstep, threads)[0]
+    log(f"interleaved timing, {rounds} rounds: {', '.join(calls)}")
+    timed = harness.time_interleaved(calls, rounds, warmup=0, block=lambda x: x)
+    first_run = tsit["seconds"]
+    t_tsit = timed["jrigid Tsit5"][0]
+    tsit.update(seconds=t_tsit.median, runs=t_tsit.runs, throughput=n / t_tsit.median,
+                first_run_seconds=first_run)
+    for label, (timing, o) in timed.items():
+        if label == "jrigid Tsit5":
+            continue
+        e = member_errors(o["q"], o["omega"], sub_q, sub_ref_w)
+        if label.startswith("scipy"):
+            rtol = RTOL if label == "scipy DOP853 loop" else matched_rtol
+            setting = f"rtol {rtol:g}, atol {rtol * 1e-2 if rtol != RTOL else ATOL:g}"
+            extra = {"median_steps": float(np.median(o["steps"]))}
+        else:
+            setting = f"h = T/{nstep} = {T1 / nstep:.4g}, {threads} threads"
+            extra = {"nstep": nstep, "calibration": trials}
+        methods[label] = {
+            "label": label, "members_timed": pick.size, "seconds": timing.median,
+            "runs": timing.runs, "throughput": pick.size / timing.median,
+            "compile_seconds": None, "errors": stats(e), "setting": setting, **extra,
+        }
+        log(f"  {label}: {timing.median:.2f} s for {pick.size} "
+            f"({pick.size / timing.median:.1f}/s), median error {np.median(e):.3g}")
+    log(f"  jrigid Tsit5: {t_tsit.median:.2f} s for {n} ({n / t_tsit.median:.0f}/s)")
+
+    scipy_same = methods["scipy DOP853 loop"]["throughput"]
+    scipy_matched = methods.get("scipy DOP853 loop, matched error",
+                                methods["scipy DOP853 loop"])["throughput"]
+    mj = methods["MuJoCo RK4 rollout"]
+    verdict = {
+        "tsit5_vs_scipy_same_rtol": tsit["throughput"] / scipy_same,
+        "tsit5_vs_scipy_matched": tsit["throughput"] / scipy_matched,
+        "exact_vs_scipy": exact_m["throughput"] / scipy_same,
+        "tsit5_vs_mujoco": tsit["throughput"] / mj["throughput"],
+        "exact_vs_mujoco": exact_m["throughput"] / mj["throughput"],
+        "mujoco_error": mj["errors"]["median"],
+        "jrigid_error": jr_sub,
+    }
+    verdict["tsit5_scipy_met"] = min(verdict["tsit5_vs_scipy_same_rtol"],
+                                     verdict["tsit5_vs_scipy_matched"]) >= TARGET_SPEEDUP_SCIPY
+    verdict["exact_scipy_met"] = verdict["exact_vs_scipy"] >= TARGET_SPEEDUP_SCIPY
+    machine["load_average_end"] = harness.machine_info()["load_average"]
+    res = {
+        "n": n, "quick": args.quick, "machine": machine, "machine_line": mline,
+        "n_devices": len(devices), "subset": pick.size, "rtol": RTOL, "atol": ATOL,
+        "moments": MOMENTS, "omega": OMEGA, "periods": PERIODS, "t1": T1,
+        "reference_check": ref_check, "reference_members": int(few.size),
+        "steps": {"median": float(np.median(steps)), "max": float(steps.max()),
+                  "lockstep_useful": float(useful)},
+        "methods": {k: {kk: vv for kk, vv in v.items() if kk != "out"}
+                    for k, v in methods.items()},
+        "verdict": verdict,
+    }
+    res["total_seconds"] = time.perf_counter() - start_all
+    text = report(res)
+    out_dir = harness.results_dir(args.out)
+    stem = "ensemble_throughput" + ("_quick" if args.quick else "")
+    harness.write_json(out_dir / f"{stem}.json", res)
+    harness.write_text(out_dir / f"{stem}.md", text)
+    print(text)
+    return res
+
+
+if __name__ == "__main__":
+    main()
