@@ -7,9 +7,10 @@ Layers (imports point down the stack):
   :class:`Pivot`, :class:`FreeFlight`) and loads (:class:`Gravity`, :class:`Torque`),
   :mod:`jrigid.initial` for initial conditions, :mod:`jrigid.formulations`
 - integration: :func:`simulate` (diffrax, in :mod:`jrigid.integrate`),
+  :func:`simulate_bounces` with a :class:`Floor` (impulsive contact, :mod:`jrigid.contact`),
   :mod:`jrigid.leapfrog` (the chapter's stepper), :mod:`jrigid.exact` (closed-form
   torque-free motion) on :mod:`jrigid.special` (elliptic functions)
-- applications: :mod:`jrigid.fit`
+- applications: :mod:`jrigid.fit`, :mod:`jrigid.ensemble`
 - presentation: :mod:`jrigid.viz` (matplotlib), the ``jrigid`` command line
 
 Names and submodules load on first use, so ``import jrigid`` imports neither JAX nor
@@ -41,10 +42,13 @@ _EXPORTS = {
     "Result": "jrigid.integrate",
     "SimulationError": "jrigid.integrate",
     "simulate": "jrigid.integrate",
+    "Floor": "jrigid.contact",
+    "simulate_bounces": "jrigid.contact",
 }
 _SUBMODULES = (
     "affine",
     "body",
+    "ensemble",
     "exact",
     "fit",
     "formulations",
@@ -82,6 +86,7 @@ if TYPE_CHECKING:
     from jrigid import (  # noqa: F401
         affine,
         body,
+        ensemble,
         exact,
         fit,
         formulations,
@@ -97,6 +102,7 @@ if TYPE_CHECKING:
         viz,
     )
     from jrigid.body import RigidBody  # noqa: F401
+    from jrigid.contact import Floor, simulate_bounces  # noqa: F401
     from jrigid.formulations import (  # noqa: F401
         BodyOmega,
         EulerAngles,

@@ -535,6 +535,8 @@ def simulate(
         SimulationError: a failed integration, when ``throw`` and values are concrete.
     """
     formulation = get_formulation(formulation)
+    if isinstance(scene, Scene) and any(load.impulsive for load in scene.loads):
+        raise ValueError("a scene with a Floor bounces: use jrigid.contact.simulate_bounces")
     if isinstance(solver, str):
         if solver != "exact":
             raise ValueError(f"solver must be a diffrax solver or 'exact', got {solver!r}")

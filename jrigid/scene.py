@@ -11,8 +11,9 @@ a holder
 - :class:`FreeFlight` — the centre of mass translates (``x, v`` join the state) and the
   body turns about it;
 
-and a tuple of loads: :class:`Gravity` (uniform field) and :class:`Torque` (a user
-function ``N(t, kin, params)`` in the body or space frame). Every part is an
+and a tuple of loads: :class:`Gravity` (uniform field), :class:`Torque` (a user
+function ``N(t, kin, params)`` in the body or space frame) and the impulsive
+:class:`jrigid.contact.Floor`. Every part is an
 ``equinox.Module``, so scenes are pytrees: ``jit``, ``vmap`` and ``grad`` reach the
 moments, mass, lever arm, field strength and torque parameters alike.
 
@@ -101,8 +102,11 @@ class AbstractLoad(eqx.Module):
 
     Subclasses implement :meth:`wrench` and may implement :meth:`potential` and
     :meth:`uses_orientation` (formulations without an orientation, such as
-    ``body_omega``, reject loads that use it).
+    ``body_omega``, reject loads that use it). An ``impulsive`` load (the floor of
+    :mod:`jrigid.contact`) acts by impulses that :func:`jrigid.simulate` cannot apply.
     """
+
+    impulsive: ClassVar[bool] = False
 
     def wrench(self, t, kin: Kinematics, scene: Scene) -> tuple[jax.Array, jax.Array]:
         """``(force (3,), space frame; torque (3,) about the rotation centre, body frame)``."""
@@ -246,7 +250,7 @@ class Scene(eqx.Module):
             )
         for load in self.loads:
             if not isinstance(load, AbstractLoad):
-                raise ValueError(f"Scene loads must be Gravity or Torque, got {load!r}")
+                raise ValueError(f"Scene loads must be Gravity, Torque or Floor, got {load!r}")
 
     @property
     def translates(self) -> bool:

@@ -1,0 +1,583 @@
+"""Impulsive contact with a horizontal floor: a :class:`Floor` load and :func:`simulate_bounces`.
+
+A body in free flight (:class:`~jrigid.scene.FreeFlight`, usually with
+:class:`~jrigid.scene.Gravity`) falls onto the plane ``z = height``. Its shape enters only
+through a set of body-frame contact points (the corners of a box, :func:`box_corners`):
+between contacts the motion is integrated by diffrax; a contact is the moment the lowest
+point reaches the floor, located by a terminating :class:`diffrax.Event` whose root finder
+(``optimistix.Bisection``, robust where the lowest point changes) solves
+``min_k z_k(t) = height − contact_tol`` on the dense output; there the velocities jump by
+an impulse and the integration starts again.
+
+**Impulse model** (space frame; ``r`` from the centre of mass to the contact point,
+``n = e_z`` the floor normal, ``u = v + ω_s × r`` the velocity of the contact point).
+An impulse ``P`` at ``r`` changes ``v`` by ``P/M`` and ``ω_s`` by ``I_s⁻¹ (r × P)``, hence
+``Δu = K P`` with the collision matrix ``K = 1/M − [r]× I_s⁻¹ [r]×`` (``I_s = R I Rᵀ``).
+Newton's restitution asks ``u_n⁺ = −e u_n⁻``. With Coulomb friction coefficient ``μ``
+the impulse is first sought with sticking, ``u_t⁺ = 0``: ``P = K⁻¹(−(1+e) u_n n − u_t)``;
+if it lies in the friction cone ``|P_t| ≤ μ P_n`` it is taken. Otherwise the contact
+slides: ``P = P_n (n + μ t̂)`` along the tangential direction ``t̂`` of the sticking impulse
+(the direction friction would push to stop the slip, i.e. the sliding impulse never
+reverses the tangential velocity), with ``P_n = −(1+e) u_n / (n·K(n + μ t̂))`` from
+the restitution condition. (In 3D the slip direction may turn during a real impact;
+taking it once, from the sticking impulse, is the usual algebraic simplification. With
+friction, Newton's restitution can in rare configurations return a little energy
+(Kane's paradox): :func:`simulate_bounces` records the energy at every contact.)
+Frictionless (``μ = 0``): ``P = m_eff (1+e) |u_n| n`` with
+``m_eff = 1/(n·K n)``, and the kinetic energy drops by ``(1 − e²) ½ m_eff u_n²`` (zero
+for ``e = 1``). Every impulse at a point conserves the angular momentum about that
+point and changes the linear momentum by ``P``.
+
+Several points near the floor at once (a box landing on an edge or face) are resolved by
+sequential impulses: the most strongly approaching point within ``contact_tol`` of the
+floor gets its impulse, then the next, until none approaches.
+
+:func:`simulate_bounces` drives the segments from Python (each segment and each contact
+resolution is one compiled call), so it is not itself ``jit``/``grad``-able; the pure
+functions here are. It stops at the final time, after ``max_bounces`` contacts, or when
+contacts pile up: ``rapid_bounces`` consecutive contacts each less than ``min_gap``
+after the previous one ("too many bounces in too short a time", status ``"resting"``);
+the body is then held still and the kinetic energy left (small) is reported as dropped.
+The model has impulses only, no sustained contact, so this is also where it stops when a
+box would go on sliding flat, or pivoting on an edge while it tips over.
+
+Errors: with concrete values bad input raises ``ValueError`` (:class:`Floor` at
+construction, :func:`simulate_bounces` before compiling); the pure functions do no
+checks and are safe under ``jit``/``vmap``/``grad``.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar, NamedTuple
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jax.typing import ArrayLike
+
+from jrigid import quaternion as quat
+from jrigid._checks import as_float, is_traced
+from jrigid.formulations import get_formulation
+from jrigid.integrate import ProjectedSolver, prepare, validate
+from jrigid.scene import AbstractLoad, Scene
+from jrigid.state import State
+from jrigid.trajectory import Trajectory
+
+__all__ = [
+    "BounceRun",
+    "Floor",
+    "apply_impulse",
+    "box_corners",
+    "collision_matrix",
+    "contact_impulse",
+    "effective_mass",
+    "point_positions",
+    "point_velocities",
+    "simulate_bounces",
+]
+
+
+# --------------------------------------------------------------------------- geometry
+
+
+def box_corners(size: ArrayLike, planar: bool = False) -> jax.Array:
+    """Corners of a box centred on its centre of mass, body frame.
+
+    Args:
+        size: ``(3,)`` full side lengths ``(a, b, c)`` along body ``x, y, z``.
+        planar: static; if true return the 4 corners of the ``a × c`` rectangle in the
+            plane ``y = 0`` (midpoints of the edges along ``y``), the contact points of a
+            box moving in the ``xz`` plane and turning about ``y``.
+
+    Returns:
+        ``(8, 3)`` (or ``(4, 3)`` if ``planar``) points ``(±a/2, ±b/2, ±c/2)``.
+    """
+    half = 0.5 * as_float(size)
+    signs = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float)
+    if planar:
+        signs = np.array([[i, 0, k] for i in (-1, 1) for k in (-1, 1)], float)
+    return jnp.asarray(signs, dtype=half.dtype) * half[None, :]
+
+
+def point_positions(q: ArrayLike, x: ArrayLike, points: ArrayLike) -> jax.Array:
+    """Space positions ``x + R(q) p`` of body-frame points.
+
+    Args:
+        q: ``(4,)`` unit orientation (body → space).
+        x: ``(3,)`` centre of mass.
+        points: ``(K, 3)`` body-frame points relative to the centre of mass.
+
+    Returns:
+        ``(K, 3)``.
+    """
+    return jnp.asarray(x)[None, :] + quat.rotate(jnp.asarray(q)[None, :], points)
+
+
+def point_velocities(q: ArrayLike, omega: ArrayLike, v: ArrayLike, points: ArrayLike) -> jax.Array:
+    """Space velocities ``v + ω_s × (R p)`` of body-frame points.
+
+    Args:
+        q: ``(4,)`` unit orientation.
+        omega: ``(3,)`` body angular velocity.
+        v: ``(3,)`` centre-of-mass velocity.
+        points: ``(K, 3)`` body-frame points.
+
+    Returns:
+        ``(K, 3)``.
+    """
+    q = jnp.asarray(q)
+    r = quat.rotate(q[None, :], points)
+    w = quat.rotate(q, omega)
+    return jnp.asarray(v)[None, :] + jnp.cross(jnp.broadcast_to(w, r.shape), r)
+
+
+# --------------------------------------------------------------------------- impulses
+
+
+def _skew(r: jax.Array) -> jax.Array:
+    z = jnp.zeros((), r.dtype)
+    return jnp.array([[z, -r[2], r[1]], [r[2], z, -r[0]], [-r[1], r[0], z]])
+
+
+def _solve3(a: jax.Array, b: jax.Array) -> jax.Array:
+    """``a⁻¹ b`` for one ``(3, 3)`` matrix by the adjugate (cheap to compile)."""
+    c0 = jnp.cross(a[:, 1], a[:, 2])
+    c1 = jnp.cross(a[:, 2], a[:, 0])
+    c2 = jnp.cross(a[:, 0], a[:, 1])
+    return jnp.stack([jnp.dot(c0, b), jnp.dot(c1, b), jnp.dot(c2, b)]) / jnp.dot(a[:, 0], c0)
+
+
+def _inverse_inertia_space(moments: jax.Array, q: jax.Array) -> jax.Array:
+    R = quat.to_matrix(q)
+    return (R / moments[None, :]) @ R.T
+
+
+def collision_matrix(mass, moments, q, r) -> jax.Array:
+    """``K = 1/M − [r]× I_s⁻¹ [r]×``: contact-point velocity change per unit impulse.
+
+    Args:
+        mass: ``()`` mass ``M``.
+        moments: ``(3,)`` principal moments about the centre of mass.
+        q: ``(4,)`` unit orientation (principal body frame → space).
+        r: ``(3,)`` contact point relative to the centre of mass, space frame.
+
+    Returns:
+        ``(3, 3)`` symmetric positive definite ``K`` with ``Δu = K P``.
+    """
+    S = _skew(as_float(r))
+    eye = jnp.eye(3, dtype=S.dtype)
+    return eye / mass - S @ _inverse_inertia_space(as_float(moments), as_float(q)) @ S
+
+
+def effective_mass(mass, moments, q, r, normal) -> jax.Array:
+    """``m_eff = 1 / (n·K n)``, the mass the floor feels at the contact point.
+
+    ``1/m_eff = 1/M + (r × n)·I_s⁻¹ (r × n)``: ``M`` for a contact below the centre of
+    mass, ``M/4`` for a thin rod (``I = M ℓ²/12``) touching with one end while level.
+
+    Args:
+        mass, moments, q, r: as :func:`collision_matrix`.
+        normal: ``(3,)`` unit normal.
+
+    Returns:
+        ``()``.
+    """
+    n = as_float(normal)
+    return 1.0 / jnp.dot(n, collision_matrix(mass, moments, q, r) @ n)
+
+
+def contact_impulse(mass, moments, q, v, omega, r, normal, restitution, friction) -> jax.Array:
+    """Impulse at a contact point: Newton restitution plus Coulomb friction with sticking.
+
+    See the module docstring for the model. Zero if the point is separating (``u_n ≥ 0``).
+
+    Args:
+        mass: ``()`` mass.
+        moments: ``(3,)`` principal moments about the centre of mass.
+        q: ``(4,)`` unit orientation.
+        v: ``(3,)`` centre-of-mass velocity (space).
+        omega: ``(3,)`` body angular velocity.
+        r: ``(3,)`` contact point relative to the centre of mass, space frame.
+        normal: ``(3,)`` unit normal, pointing out of the floor.
+        restitution: ``()`` ``e`` in ``[0, 1]``.
+        friction: ``()`` ``μ ≥ 0``.
+
+    Returns:
+        ``(3,)`` impulse on the body, space frame (batch with ``jax.vmap``).
+    """
+    q, v, omega, r, n = (as_float(a) for a in (q, v, omega, r, normal))
+    K = collision_matrix(mass, moments, q, r)
+    u = v + jnp.cross(quat.rotate(q, omega), r)
+    un = jnp.dot(u, n)
+    ut = u - un * n
+    stick = _solve3(K, -(1.0 + restitution) * un * n - ut)
+    pn = jnp.dot(stick, n)
+    pt = stick - pn * n
+    pt2 = jnp.dot(pt, pt)
+    nonzero = pt2 > 0
+    t_hat = pt / jnp.sqrt(jnp.where(nonzero, pt2, 1.0))  # double where: finite gradients
+    d = n + friction * t_hat
+    slide = (-(1.0 + restitution) * un / jnp.dot(n, K @ d)) * d
+    inside = jnp.sqrt(jnp.where(nonzero, pt2, 0.0)) <= friction * pn
+    P = jnp.where(inside, stick, slide)
+    return jnp.where(un < 0, P, jnp.zeros_like(P))
+
+
+def apply_impulse(mass, moments, q, v, omega, r, impulse) -> tuple[jax.Array, jax.Array]:
+    """Velocities after an impulse ``P`` at ``r``: ``v + P/M``, ``ω + I⁻¹ Rᵀ(r × P)``.
+
+    Args:
+        mass, moments, q, v, omega, r: as :func:`contact_impulse`.
+        impulse: ``(3,)`` impulse, space frame.
+
+    Returns:
+        ``(v (3,), ω (3,) body frame)``.
+    """
+    q, v, omega, r, impulse = (as_float(a) for a in (q, v, omega, r, impulse))
+    dL_body = quat.rotate_inverse(q, jnp.cross(r, impulse))
+    return v + impulse / mass, omega + dL_body / moments
+
+
+# --------------------------------------------------------------------------- the floor
+
+
+class Floor(AbstractLoad):
+    """A horizontal floor ``z = height`` the body bounces on (space ``z`` up).
+
+    Exerts no force between contacts (``wrench`` and ``potential`` are zero); contacts are
+    impulses handled by :func:`simulate_bounces` (:func:`jrigid.simulate` rejects scenes
+    with a floor). Needs a :class:`~jrigid.scene.FreeFlight` holder.
+
+    Attributes:
+        points: ``(K, 3)`` body-frame contact points relative to the centre of mass,
+            principal frame (e.g. :func:`box_corners`); the body's convex hull.
+        height: ``()`` floor height.
+        restitution: ``()`` coefficient of restitution ``e`` in ``[0, 1]``.
+        friction: ``()`` Coulomb coefficient ``μ ≥ 0``.
+
+    Concrete bad values raise ``ValueError`` at construction.
+    """
+
+    points: jax.Array = eqx.field(converter=as_float)
+    height: jax.Array = eqx.field(converter=as_float, default=0.0)
+    restitution: jax.Array = eqx.field(converter=as_float, default=1.0)
+    friction: jax.Array = eqx.field(converter=as_float, default=0.0)
+
+    impulsive: ClassVar[bool] = True
+
+    def __check_init__(self):
+        if self.points.ndim != 2 or self.points.shape[1] != 3 or self.points.shape[0] < 1:
+            raise ValueError(f"Floor points must have shape (K, 3), got {self.points.shape}")
+        if is_traced(self.points, self.height, self.restitution, self.friction):
+            return
+        e, mu = float(self.restitution), float(self.friction)
+        if not 0.0 <= e <= 1.0:
+            raise ValueError(f"Floor restitution must be in [0, 1], got {e}")
+        if not (np.isfinite(mu) and mu >= 0.0):
+            raise ValueError(f"Floor friction must be finite and >= 0, got {mu}")
+        if not (np.all(np.isfinite(self.points)) and np.isfinite(float(self.height))):
+            raise ValueError("Floor points and height must be finite")
+
+    def wrench(self, t, kin, scene):
+        zero = jnp.zeros(3, dtype=kin.omega.dtype)
+        return zero, zero
+
+
+def _floor(scene: Scene) -> Floor:
+    floors = [load for load in scene.loads if isinstance(load, Floor)]
+    if len(floors) != 1 or not scene.translates:
+        raise ValueError("simulate_bounces needs a FreeFlight scene with exactly one Floor load")
+    return floors[0]
+
+
+# --------------------------------------------------------------------------- compiled parts
+
+
+def _lowest(scene, formulation, y):
+    floor = _floor(scene)
+    kin = formulation.kinematics(scene, y)
+    return jnp.min(point_positions(kin.q, kin.x, floor.points)[:, 2]) - floor.height
+
+
+@eqx.filter_jit
+def _segment(scene, formulation, solver, y0, t0, t1, rtol, atol, dt0, depth, max_steps):
+    """Integrate from ``t0`` until ``t1`` or the next contact: the lowest point crossing
+    ``depth`` below the floor downwards (``depth > 0`` keeps the start, on the floor,
+    strictly above the event level)."""
+    eps = jnp.finfo(t0.dtype).eps
+    # bisection stops when the bracket is below atol + rtol |t| and |height| < atol
+    atol = jnp.maximum(0.5 * depth, 1000 * eps)
+    event = diffrax.Event(
+        lambda t, y, args, **kw: _lowest(args, formulation, y) + depth,
+        optx.Bisection(rtol=100 * eps, atol=atol, flip="detect"),
+        direction=False,
+    )
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(formulation.vector_field), solver, t0, t1, dt0, y0, args=scene,
+        saveat=diffrax.SaveAt(t1=True, dense=True),
+        stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
+        event=event, max_steps=max_steps, throw=False,
+    )  # fmt: skip
+    R = diffrax.RESULTS
+    # a bisection out of iterations still brackets the contact time to a few ulps of t
+    hit = (sol.result == R.event_occurred) | (sol.result == R.nonlinear_max_steps_reached)
+    code = jnp.where(sol.result == R.successful, 0, jnp.where(hit, 1, 2))
+    y1 = jax.tree_util.tree_map(lambda a: a[-1], sol.ys)
+    return sol.ts[-1], y1, code, sol.interpolation, sol.stats["num_steps"]
+
+
+@eqx.filter_jit
+def _sample(interpolation, ts, t_a, t_b):
+    return jax.vmap(interpolation.evaluate)(jnp.clip(ts, t_a, t_b))
+
+
+def _energies(scene, kin):
+    m = scene.body.mass
+    return jnp.stack([0.5 * m * jnp.dot(kin.v, kin.v),
+                      0.5 * jnp.dot(kin.omega, scene.body.moments * kin.omega),
+                      scene.potential_energy(kin)])  # fmt: skip
+
+
+@eqx.filter_jit
+def _resolve(scene, formulation, y, contact_tol, max_iter):
+    """Sequential impulses at the approaching points within ``contact_tol`` of the floor."""
+    floor = _floor(scene)
+    kin = formulation.kinematics(scene, y)
+    q, x, m, moments = kin.q, kin.x, scene.body.mass, scene.body.moments
+    n = jnp.zeros(3, dtype=x.dtype).at[2].set(1.0)
+    r_all = quat.rotate(q[None, :], floor.points)
+    near = (x[2] + r_all[:, 2] - floor.height) <= contact_tol
+
+    def approaching(v, omega):
+        un = point_velocities(q, omega, v, floor.points)[:, 2]
+        return jnp.where(near, un, jnp.inf)
+
+    def cond(c):
+        return (jnp.min(approaching(c[0], c[1])) < 0) & (c[2] < max_iter)
+
+    def body(c):
+        v, omega, count, first, P_sum = c
+        un = approaching(v, omega)
+        k = jnp.argmin(un)
+        r = r_all[k]
+        P = contact_impulse(m, moments, q, v, omega, r, n, floor.restitution, floor.friction)
+        v2, omega2 = apply_impulse(m, moments, q, v, omega, r, P)
+        un2 = point_velocities(q, omega2, v2, floor.points)[k, 2]
+        rec = jnp.concatenate([k[None].astype(x.dtype), un[k][None], un2[None], P])
+        first = jnp.where(count == 0, rec, first)
+        return v2, omega2, count + 1, first, P_sum + P
+
+    first0 = jnp.full(6, jnp.nan, dtype=x.dtype)
+    init = (kin.v, kin.omega, jnp.zeros((), jnp.int32), first0, jnp.zeros(3, x.dtype))
+    v, omega, count, first, P_sum = jax.lax.while_loop(cond, body, init)
+    after = type(kin)(q, omega, x, v)
+    lowest = jnp.min(x[2] + r_all[:, 2] - floor.height)
+    # lift the body out of the floor by the event's tolerance depth (<= contact_tol)
+    x_lift = x.at[2].add(jnp.maximum(-lowest, 0.0))
+    y2 = formulation.from_state(scene, State(q, quat.derivative(q, omega), x_lift, v))
+    # angular momentum about the first contact point, before and after (space frame)
+    k = jnp.where(count > 0, first[0], 0).astype(jnp.int32)
+    rc = r_all[k]
+
+    def L_about(kk):
+        Ls = quat.rotate(q, moments * kk.omega)
+        return Ls - m * jnp.cross(rc, kk.v)
+
+    return dict(
+        y=y2, count=count, first=first, P_sum=P_sum,
+        energy_before=_energies(scene, kin), energy_after=_energies(scene, after),
+        L_point_before=L_about(kin), L_point_after=L_about(after),
+        momentum_before=m * kin.v, momentum_after=m * v,
+        lowest=lowest,
+    )  # fmt: skip
+
+
+# --------------------------------------------------------------------------- driver
+
+
+class BounceRun(NamedTuple):
+    """Result of :func:`simulate_bounces`.
+
+    Attributes:
+        trajectory: :class:`~jrigid.trajectory.Trajectory` at the output times (after
+            a ``"resting"`` stop the body is held still; after ``"max_bounces"`` or
+            ``"failed"`` the samples are ``NaN``).
+        bounces: dict of numpy arrays, one row per contact: ``t``; ``point`` (index of the
+            first point hit); ``un_before``, ``un_after`` (its normal velocity before and
+            after its own impulse); ``impulse`` ``(B, 3)`` (the first) and
+            ``impulse_total`` ``(B, 3)``; ``impulses`` (how many sequential impulses);
+            ``energy_before``, ``energy_after`` ``(B, 3)`` = (translational kinetic,
+            rotational kinetic, potential); ``momentum_before/after`` ``(B, 3)``;
+            ``L_point_before/after`` ``(B, 3)`` angular momentum about the first contact
+            point; ``depth`` (how far the lowest point was below the floor).
+        status: ``"t_end"``, ``"resting"``, ``"max_bounces"`` or ``"failed"``.
+        t_stop: the final time for ``"t_end"``, else the time of the last contact.
+        dropped_energy: kinetic energy removed when the body was put to rest.
+        num_steps: solver steps over all segments.
+    """
+
+    trajectory: Trajectory
+    bounces: dict[str, np.ndarray]
+    status: str
+    t_stop: float
+    dropped_energy: float
+    num_steps: int
+
+
+def simulate_bounces(
+    scene: Scene,
+    initial_state: State,
+    ts: ArrayLike,
+    *,
+    formulation: Any = "quaternion_acceleration",
+    solver: diffrax.AbstractSolver | None = None,
+    rtol: ArrayLike | None = None,
+    atol: ArrayLike | None = None,
+    max_bounces: int = 200,
+    min_gap: float = 1e-3,
+    rapid_bounces: int = 8,
+    contact_tol: float | None = None,
+    max_steps: int = 100_000,
+) -> BounceRun:
+    """Integrate a body in free flight that bounces on a :class:`Floor`.
+
+    Args:
+        scene: a :class:`~jrigid.scene.Scene` with a :class:`~jrigid.scene.FreeFlight`
+            holder and one :class:`Floor` load (plus :class:`~jrigid.scene.Gravity`).
+        initial_state: :class:`~jrigid.state.State` with ``x, v`` at ``ts[0]``; every
+            contact point must start above the floor.
+        ts: ``(T,)`` increasing output times.
+        formulation: as :func:`jrigid.simulate` (a quaternion formulation).
+        solver: diffrax solver, default ``Tsit5``, wrapped in
+            :class:`~jrigid.integrate.ProjectedSolver`.
+        rtol, atol: step-size tolerances (defaults as :func:`jrigid.simulate`).
+        max_bounces: stop after this many contacts (status ``"max_bounces"``).
+        min_gap, rapid_bounces: resting criterion: ``rapid_bounces`` consecutive contacts
+            each within ``min_gap`` (time) of the previous one.
+        contact_tol: points within this distance of the floor take part in a contact;
+            a contact is detected when the lowest point is ``contact_tol`` below the
+            floor (so that a segment starting on the floor starts above the event
+            level), and the body is then lifted back onto the floor (an energy change
+            of at most ``M g contact_tol`` per contact). Default ``1e-10`` (float64),
+            ``1e-5`` (float32).
+        max_steps: step budget of each segment.
+
+    Returns:
+        :class:`BounceRun`.
+
+    Raises:
+        ValueError: a scene without a floor or free flight, a start below the floor,
+            bad tolerances (see :func:`jrigid.simulate`).
+    """
+    formulation = get_formulation(formulation)
+    if not formulation.carries_quaternion:
+        raise ValueError("simulate_bounces needs a quaternion formulation")
+    floor = _floor(scene)
+    dtype = jnp.result_type(float)
+    state, ts, rtol, atol = prepare(scene, initial_state, ts, rtol, atol, dtype)
+    if not (isinstance(max_bounces, int) and max_bounces >= 0):
+        raise ValueError(f"max_bounces must be an int >= 0, got {max_bounces!r}")
+    q0 = quat.normalize(state.q)
+    if float(jnp.min(point_positions(q0, state.x, floor.points)[:, 2])) < float(floor.height):
+        raise ValueError("the body starts below the floor: raise initial_state.x")
+    formulation.check_scene(scene)
+    validate(formulation, scene, state, ts, rtol, atol)
+    solver = ProjectedSolver(diffrax.Tsit5() if solver is None else solver, formulation)
+    y = formulation.from_state(scene, State(q0, state.qdot, state.x, state.v))
+    t, t1 = ts[0], ts[-1]
+    dt0 = jnp.asarray(min_gap / 4, dtype)
+    if contact_tol is None:
+        contact_tol = 1e-10 if jnp.dtype(dtype).itemsize >= 8 else 1e-5
+    tol = jnp.asarray(contact_tol, dtype)
+    ts_np = np.asarray(ts)
+    ys = jax.tree_util.tree_map(lambda a: np.full((len(ts_np),) + a.shape, np.nan, a.dtype), y)
+    rows, status, rapid, last, steps, dropped, grazes = [], "t_end", 0, -np.inf, 0, 0.0, 0
+    while True:
+        t_hit, y_hit, code, interp, n_steps = _segment(
+            scene, formulation, solver, y, t, t1, rtol, atol, dt0, tol, max_steps
+        )
+        steps += int(n_steps)
+        t_hit_f = float(t_hit)
+        mask = (ts_np >= float(t)) & (ts_np <= t_hit_f)
+        if mask.any():
+            idx = np.nonzero(mask)[0]
+            size = max(64, 1 << (len(idx) - 1).bit_length())  # few compiled sizes
+            tt = np.full(size, t_hit_f, ts_np.dtype)
+            tt[: len(idx)] = ts_np[idx]
+            seg = jax.device_get(_sample(interp, jnp.asarray(tt), t, t_hit))
+            ys = _put(ys, idx, seg)
+        code = int(code)
+        if code == 2:
+            status = "failed"
+            break
+        if code == 0:
+            break
+        res = jax.device_get(_resolve(scene, formulation, y_hit, tol, 20 * len(floor.points)))
+        if int(res["count"]) == 0:  # grazing: the lowest point was not approaching
+            grazes += 1
+            if grazes > 10:
+                status = "failed"
+                break
+            y, t = res["y"], t_hit
+            continue
+        grazes = 0
+        row = dict(t=t_hit_f, point=int(res["first"][0]), un_before=res["first"][1],
+                   un_after=res["first"][2], impulse=res["first"][3:],
+                   impulse_total=res["P_sum"], impulses=int(res["count"]),
+                   energy_before=res["energy_before"], energy_after=res["energy_after"],
+                   momentum_before=res["momentum_before"], momentum_after=res["momentum_after"],
+                   L_point_before=res["L_point_before"], L_point_after=res["L_point_after"],
+                   depth=-float(res["lowest"]))  # fmt: skip
+        rows.append(row)
+        y, t = res["y"], t_hit
+        rapid = rapid + 1 if t_hit_f - last < min_gap else 0
+        last = t_hit_f
+        if rapid >= rapid_bounces:
+            status = "resting"
+            dropped = float(np.sum(res["energy_after"][:2]))
+            rest = jax.device_get(_at_rest(scene, formulation, y))
+            ys = _put(ys, np.nonzero(ts_np > t_hit_f)[0], rest)
+            break
+        if len(rows) >= max_bounces:
+            status = "max_bounces"
+            break
+    t_stop = float(t1) if status == "t_end" else float(t)
+    stats = dict(num_steps=jnp.asarray(steps))
+    ys = jax.tree_util.tree_map(jnp.asarray, ys)
+    traj = Trajectory.build(
+        scene, formulation, ts, ys, stats=stats,
+        result=jnp.asarray(0 if status in ("t_end", "resting") else 1, jnp.int32),
+        t_stop=jnp.asarray(t_stop, dtype),
+    )  # fmt: skip
+    return BounceRun(traj, _stack(rows), status, t_stop, dropped, steps)
+
+
+def _put(ys, idx, new):
+    """Write ``new`` (its first rows, or one row broadcast) into rows ``idx`` of ``ys``."""
+
+    def put(a, b):
+        a[idx] = b[: len(idx)] if b.ndim == a.ndim else b
+        return a
+
+    return jax.tree_util.tree_map(put, ys, new)
+
+
+def _at_rest(scene, formulation, y):
+    kin = formulation.kinematics(scene, y)
+    zero = jnp.zeros(3, dtype=kin.x.dtype)
+    return formulation.from_state(scene, State(kin.q, jnp.zeros(4, kin.q.dtype), kin.x, zero))
+
+
+def _stack(rows: list[dict]) -> dict[str, np.ndarray]:
+    keys = ("t", "point", "un_before", "un_after", "impulse", "impulse_total", "impulses",
+            "energy_before", "energy_after", "momentum_before", "momentum_after",
+            "L_point_before", "L_point_after", "depth")  # fmt: skip
+    shapes = {"impulse": (0, 3), "impulse_total": (0, 3), "energy_before": (0, 3),
+              "energy_after": (0, 3), "momentum_before": (0, 3), "momentum_after": (0, 3),
+              "L_point_before": (0, 3), "L_point_after": (0, 3)}  # fmt: skip
+    if not rows:
+        return {k: np.zeros(shapes.get(k, (0,))) for k in keys}
+    return {k: np.asarray([np.asarray(r[k]) for r in rows]) for k in keys}

@@ -1,0 +1,279 @@
+"""jrigid.contact: impulses against hand-derived results, and bounces against closed forms.
+
+The impulse tests use bodies whose response is known on paper: a sphere hit below its
+centre (point-mass bounce, rolling with friction, sliding), a rod landing on its end or
+level on one end (``m_eff = M`` and ``M/4``), the energy loss ``(1 − e²) ½ m_eff u_n²``.
+General random states check the balance laws an impulse at a point must obey. The
+simulated bounces of a ball are compared with the closed-form bouncing-ball sequence.
+Every ``simulate_bounces`` call here uses 8 contact points, the shape the falling-box
+experiment uses, so the compiled segment solver is shared.
+"""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
+
+from jrigid import contact, inertia, initial
+from jrigid import quaternion as quat
+from jrigid.body import RigidBody
+from jrigid.integrate import simulate
+from jrigid.scene import FreeFlight, Gravity, Scene
+
+N = np.array([0.0, 0.0, 1.0])
+impulse = jax.jit(contact.contact_impulse)
+apply = jax.jit(contact.apply_impulse)
+effective_mass = jax.jit(contact.effective_mass)
+
+
+def kinetic(m, moments, q, v, omega):
+    return 0.5 * m * np.dot(v, v) + 0.5 * np.dot(omega, np.asarray(moments) * omega)
+
+
+def after(m, moments, q, v, omega, r, e, mu):
+    P = impulse(m, moments, q, v, omega, r, N, e, mu)
+    v2, w2 = apply(m, moments, q, v, omega, r, P)
+    return np.array(P), np.array(v2), np.array(w2)
+
+
+def contact_velocity(q, v, omega, r):
+    R = Rotation.from_quat(np.array(q, float), scalar_first=True)
+    return np.array(v, float) + np.cross(R.apply(np.array(omega, float)), r)
+
+
+# --------------------------------------------------------------------------- sphere
+
+
+@pytest.mark.parametrize("e", [0.0, 0.5, 1.0])
+def test_sphere_frictionless_bounce_is_a_point_mass_bounce(e):
+    m, a = 2.0, 0.3
+    moments = inertia.sphere(m, a)
+    q, v, w = np.array([1.0, 0, 0, 0]), np.array([0.7, -0.2, -3.0]), np.array([0.1, 0.4, 2.0])
+    P, v2, w2 = after(m, moments, q, v, w, np.array([0, 0, -a]), e, 0.0)
+    # contact straight below the centre: no lever arm, m_eff = m, P = (1 + e) m |v_z| n
+    np.testing.assert_allclose(P, [0, 0, (1 + e) * m * 3.0], atol=1e-12)
+    np.testing.assert_allclose(v2, [0.7, -0.2, 3.0 * e], atol=1e-12)
+    np.testing.assert_allclose(w2, w, atol=1e-12)
+
+
+def test_sphere_with_sticking_friction_leaves_rolling_at_five_sevenths():
+    # angular momentum about the contact point: m u a = m u' a + (2/5) m a² ω', ω' a = u'
+    m, a, u, wz, e = 1.5, 0.2, 2.0, 1.0, 0.6
+    moments = inertia.sphere(m, a)
+    q = np.array([1.0, 0, 0, 0])
+    r = np.array([0, 0, -a])
+    P, v2, w2 = after(m, moments, q, np.array([u, 0, -wz]), np.zeros(3), r, e, 10.0)
+    np.testing.assert_allclose(v2, [5 * u / 7, 0, e * wz], atol=1e-12)
+    np.testing.assert_allclose(w2, [0, 5 * u / (7 * a), 0], atol=1e-12)
+    np.testing.assert_allclose(contact_velocity(q, v2, w2, r)[:2], 0, atol=1e-12)
+
+
+def test_sphere_sliding_friction_impulse_is_mu_times_normal():
+    # sliding (μ (1+e) w < 2u/7): P_t = −μ (1+e) m w; ω_y' = a μ (1+e) m w / I
+    m, a, u, wz, e, mu = 1.0, 0.25, 3.0, 1.0, 0.5, 0.2
+    moments = inertia.sphere(m, a)
+    q = np.array([1.0, 0, 0, 0])
+    P, v2, w2 = after(m, moments, q, np.array([u, 0, -wz]), np.zeros(3), [0, 0, -a], e, mu)
+    pn = (1 + e) * m * wz
+    np.testing.assert_allclose(P, [-mu * pn, 0, pn], atol=1e-12)
+    np.testing.assert_allclose(v2, [u - mu * pn / m, 0, e * wz], atol=1e-12)
+    np.testing.assert_allclose(w2, [0, a * mu * pn / float(moments[1]), 0], atol=1e-12)
+
+
+def test_sphere_bounce_in_float32(float32):
+    m, a, e = 1.0, 0.3, 0.5
+    P = contact.contact_impulse(m, inertia.sphere(m, a), jnp.array([1.0, 0, 0, 0]),
+                                jnp.array([0.5, 0, -2.0]), jnp.zeros(3), jnp.array([0, 0, -a]),
+                                jnp.asarray(N, jnp.float32), e, 0.0)  # fmt: skip
+    assert P.dtype == jnp.float32
+    np.testing.assert_allclose(np.asarray(P), [0, 0, (1 + e) * m * 2.0], rtol=1e-6, atol=1e-6)
+
+
+def test_separating_point_gets_no_impulse():
+    P = impulse(1.0, jnp.ones(3), jnp.array([1.0, 0, 0, 0]), jnp.array([0.0, 0, 1.0]),
+                jnp.zeros(3), jnp.array([0, 0, -0.5]), jnp.asarray(N), 0.5, 0.3)  # fmt: skip
+    np.testing.assert_array_equal(np.asarray(P), 0.0)
+
+
+# --------------------------------------------------------------------------- rod
+
+
+def rod(m=1.0, length=2.0):
+    return inertia.solid_cylinder(m, 0.01, length), m, length  # axis along body z
+
+
+@pytest.mark.parametrize("angle_deg", [0.0, 20.0, 45.0, 70.0, 90.0])
+@pytest.mark.parametrize("e", [0.0, 0.5, 1.0])
+def test_rod_effective_mass_and_energy_loss(angle_deg, e):
+    moments, m, length = rod()
+    angle = math.radians(angle_deg)  # tilt of the rod axis from the vertical
+    q = np.array(quat.from_axis_angle(jnp.array([0.0, 1.0, 0.0]), angle))
+    axis = Rotation.from_quat(q, scalar_first=True).apply([0, 0, 1])
+    r = -0.5 * length * axis  # the lower end
+    # hand result: 1/m_eff = 1/m + |r × n|² / I_perp (r × n is normal to the rod axis)
+    arm = 0.5 * length * math.sin(angle)
+    m_eff = 1.0 / (1.0 / m + arm**2 / float(moments[0]))
+    assert float(effective_mass(m, moments, q, r, N)) == pytest.approx(m_eff, rel=1e-12)
+    if angle_deg == 0.0:
+        assert m_eff == pytest.approx(m)  # on its end: a point mass
+    if angle_deg == 90.0:
+        assert m_eff == pytest.approx(m / 4, rel=1e-3)  # level thin rod on one end
+    v, w = np.array([0.3, 0.0, -2.0]), np.zeros(3)
+    un = -2.0
+    _, v2, w2 = after(m, moments, q, v, w, r, e, 0.0)
+    lost = kinetic(m, moments, q, v, w) - kinetic(m, moments, q, v2, w2)
+    assert lost == pytest.approx((1 - e * e) * 0.5 * m_eff * un * un, rel=1e-10, abs=1e-13)
+    assert contact_velocity(q, v2, w2, r)[2] == pytest.approx(-e * un, rel=1e-10)
+
+
+# --------------------------------------------------------------------------- balance laws
+
+unit = st.floats(-1.0, 1.0)
+vec = st.tuples(unit, unit, unit).map(np.array)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    qv=st.tuples(unit, unit, unit, unit).filter(lambda t: np.linalg.norm(t) > 0.2),
+    v=vec, w=vec, r=vec,
+    e=st.floats(0.0, 1.0), mu=st.sampled_from([0.0, 0.1, 0.5, 2.0]),
+)  # fmt: skip
+def test_impulse_balance_laws(qv, v, w, r, e, mu):
+    m, moments = 1.3, np.array([0.4, 0.7, 0.9])
+    q = np.asarray(qv) / np.linalg.norm(qv)
+    v = v * 3 - np.array([0, 0, 2.0])  # mostly approaching
+    R = Rotation.from_quat(q, scalar_first=True)
+    P, v2, w2 = after(m, moments, q, v, w * 3, r, e, mu)
+    u1 = contact_velocity(q, v, w * 3, r)
+    u2 = contact_velocity(q, v2, w2, r)
+    # linear momentum changes by P; angular momentum about the contact point is unchanged
+    np.testing.assert_allclose(m * (v2 - v), P, atol=1e-12)
+
+    def L_contact(vv, ww):
+        return R.apply(moments * ww) + m * np.cross(-r, vv)
+
+    np.testing.assert_allclose(L_contact(v2, w2), L_contact(v, w * 3), atol=1e-11)
+    if u1[2] >= 0:
+        np.testing.assert_array_equal(P, 0.0)
+        return
+    # restitution along the normal, inside the friction cone, pushing out of the floor
+    assert u2[2] == pytest.approx(-e * u1[2], rel=1e-9, abs=1e-12)
+    assert P[2] >= 0
+    assert np.hypot(P[0], P[1]) <= mu * P[2] * (1 + 1e-9) + 1e-12
+    if mu == 0.0:
+        np.testing.assert_allclose(P[:2], 0.0, atol=1e-14)
+        assert kinetic(m, moments, q, v2, w2) <= kinetic(m, moments, q, v, w * 3) + 1e-9
+
+
+@pytest.mark.parametrize("mu", [0.05, 0.3, 1.0, 5.0])
+def test_planar_friction_never_reverses_the_slip(mu):
+    # a tilted box corner hits the floor sliding in +x: afterwards it slides in +x or sticks
+    m, moments = 1.0, np.array(inertia.box(1.0, 1.0, 0.6, 0.3))
+    q = np.array(quat.from_axis_angle(jnp.array([0.0, 1.0, 0.0]), 0.5))
+    r = Rotation.from_quat(q, scalar_first=True).apply([-0.5, 0.0, -0.15])
+    for w_y in (-6.0, -2.0, 0.0, 2.0, 6.0):
+        v, w = np.array([1.0, 0, -2.0]), np.array([0.0, w_y, 0.0])
+        u1 = contact_velocity(q, v, w, r)
+        _, v2, w2 = after(m, moments, q, v, w, r, 0.5, mu)
+        u2 = contact_velocity(q, v2, w2, r)
+        assert u2[1] == pytest.approx(0.0, abs=1e-12)  # stays planar
+        assert u2[0] * np.sign(u1[0]) >= -1e-12
+
+
+# --------------------------------------------------------------------------- geometry
+
+
+def test_box_corners_and_positions_match_scipy():
+    size = (1.0, 0.6, 0.3)
+    c = np.array(contact.box_corners(size))
+    assert c.shape == (8, 3)
+    np.testing.assert_allclose(np.sort(np.unique(c[:, 0])), [-0.5, 0.5])
+    np.testing.assert_allclose(np.sort(np.unique(c[:, 2])), [-0.15, 0.15])
+    p = np.asarray(contact.box_corners(size, planar=True))
+    assert p.shape == (4, 3) and np.all(p[:, 1] == 0)
+    q = np.array(quat.normalize(jnp.array([0.9, 0.2, -0.3, 0.1])))
+    x, v, w = np.array([1.0, 2.0, 3.0]), np.array([0.1, 0.2, 0.3]), np.array([1.0, -2.0, 0.5])
+    R = Rotation.from_quat(q, scalar_first=True)
+    np.testing.assert_allclose(contact.point_positions(q, x, c), x + R.apply(c), atol=1e-12)
+    expect = v + np.cross(R.apply(w), R.apply(c))
+    np.testing.assert_allclose(contact.point_velocities(q, w, v, c), expect, atol=1e-12)
+
+
+def test_floor_and_entry_points_reject_bad_input():
+    pts = contact.box_corners((1.0, 1.0, 1.0))
+    with pytest.raises(ValueError, match="restitution"):
+        contact.Floor(pts, 0.0, 1.5, 0.0)
+    with pytest.raises(ValueError, match="friction"):
+        contact.Floor(pts, 0.0, 0.5, -1.0)
+    with pytest.raises(ValueError, match="shape"):
+        contact.Floor(jnp.zeros(3))
+    body = RigidBody(inertia.box(1.0, 1.0, 1.0, 1.0), 1.0)
+    scene = Scene(body, FreeFlight(), (Gravity(), contact.Floor(pts)))
+    state = initial.from_omega(None, (0.0, 0.0, 0.0), x=(0.0, 0.0, 2.0), v=(0.0, 0.0, 0.0))
+    with pytest.raises(ValueError, match="simulate_bounces"):
+        simulate(scene, state, jnp.linspace(0.0, 1.0, 3))
+    with pytest.raises(ValueError, match="Floor"):
+        contact.simulate_bounces(Scene(body, FreeFlight(), Gravity()), state, [0.0, 1.0])
+    low = initial.from_omega(None, (0.0, 0.0, 0.0), x=(0.0, 0.0, 0.2), v=(0.0, 0.0, 0.0))
+    with pytest.raises(ValueError, match="below the floor"):
+        contact.simulate_bounces(scene, low, [0.0, 1.0])
+
+
+# --------------------------------------------------------------------------- bouncing ball
+
+
+def ball_scene(a, e, g=9.81):
+    body = RigidBody(inertia.sphere(1.0, a), 1.0)
+    pts = jnp.tile(jnp.array([[0.0, 0.0, -a]]), (8, 1))  # 8 points: shares the compiled solve
+    return Scene(body, FreeFlight(), (Gravity(g), contact.Floor(pts, 0.0, e, 0.0)))
+
+
+@pytest.mark.parametrize("e", [1.0, 0.8])
+def test_ball_bounce_times_follow_the_closed_form(e):
+    a, h, g, vx = 0.1, 2.0, 9.81, 0.5
+    scene = ball_scene(a, e, g)
+    state = initial.from_omega(None, (0.0, 0.0, 0.0), x=(0.0, 0.0, h), v=(vx, 0.0, 0.0))
+    run = contact.simulate_bounces(scene, state, jnp.linspace(0.0, 4.0, 101), max_bounces=6)
+    b = run.bounces
+    # t1 = sqrt(2 (h − a)/g), then intervals 2 e^k v1 / g with v1 = g t1
+    t1 = math.sqrt(2 * (h - a) / g)
+    v1 = g * t1
+    k = np.arange(len(b["t"]))
+    expect = t1 + np.concatenate([[0.0], np.cumsum(2 * v1 * e ** k[1:] / g)])
+    n = min(len(expect), int(np.sum(expect < 4.0)))
+    assert n >= 3
+    # event located to ~1e-12 s; integration of a parabola by Tsit5 is exact to roundoff
+    np.testing.assert_allclose(b["t"][:n], expect[:n], rtol=1e-9)
+    np.testing.assert_allclose(b["un_after"] / b["un_before"], -e, rtol=1e-10)
+    np.testing.assert_allclose(b["momentum_after"][:, :2], b["momentum_before"][:, :2], atol=1e-14)
+    E = np.asarray(run.trajectory.energy)
+    if e == 1.0:  # at rtol 1e-8 the parabola is integrated exactly; the floor lift is 1e-10
+        assert np.max(np.abs(E / E[0] - 1)) < 1e-8
+    ok = np.asarray(run.trajectory.ts) <= run.t_stop  # NaN after a max_bounces stop
+    assert run.status == ("t_end" if e == 1.0 else "max_bounces") and ok.sum() > 50
+    x = np.asarray(run.trajectory.x)[ok]
+    np.testing.assert_allclose(x[:, 0], vx * np.asarray(run.trajectory.ts)[ok], rtol=1e-9)
+    assert np.all(x[:, 2] >= a - 1e-9)
+
+
+def test_ball_comes_to_rest_before_the_zeno_time():
+    a, h, g, e = 0.1, 1.0, 9.81, 0.5
+    scene = ball_scene(a, e, g)
+    state = initial.from_omega(None, (0.0, 0.0, 0.0), x=(0.0, 0.0, h), v=(0.0, 0.0, 0.0))
+    ts = jnp.linspace(0.0, 3.0, 101)
+    run = contact.simulate_bounces(scene, state, ts, min_gap=1e-3, rapid_bounces=4)
+    t1 = math.sqrt(2 * (h - a) / g)
+    zeno = t1 + 2 * e * g * t1 / (g * (1 - e))  # t1 + Σ 2 e^k v1 / g
+    assert run.status == "resting"
+    last = run.bounces["t"][-1]
+    # stops once 4 successive gaps are below 1e-3: the remaining gaps sum to < 2e-3
+    assert zeno - 2e-3 < last < zeno
+    x = np.asarray(run.trajectory.x)
+    assert x[-1, 2] == pytest.approx(a, abs=1e-9)
+    np.testing.assert_array_equal(np.asarray(run.trajectory.v)[-1], 0.0)
+    assert run.dropped_energy < 0.5 * (g * 1e-3) ** 2  # below ½ (g · gap)² (unit mass)
