@@ -70,6 +70,7 @@ from typing import NamedTuple
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax.typing import ArrayLike
 
 from jrigid import quaternion as quat
@@ -126,7 +127,8 @@ def _as_inputs(moments, q0, omega0):
         raise ValueError(f"q0 must have shape (..., 4), got {q0.shape}")
     if omega0.shape[-1:] != (3,):
         raise ValueError(f"omega0 must have shape (..., 3), got {omega0.shape}")
-    if not isinstance(moments, jax.core.Tracer) and not bool(jnp.all(moments > 0)):
+    # numpy, not jnp: inside jit even a concrete array's comparison would be traced.
+    if not isinstance(moments, jax.core.Tracer) and not np.all(np.asarray(moments) > 0):
         raise ValueError(f"exact: principal moments must be positive, got {moments}")
     return tuple(x.astype(dtype) for x in (moments, q0, omega0))
 

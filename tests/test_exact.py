@@ -703,3 +703,15 @@ def test_bad_input_raises():
     # Under jit: equinox.error_if (raised when the computation runs).
     with pytest.raises(Exception, match="principal moments must be positive"):
         jax.jit(exact.prepare)(np.array([1.0, 0.0, 3.0]), Q0, np.ones(3)).nu.block_until_ready()
+
+
+def test_concrete_moments_captured_by_jit():
+    """Moments closed over by a jitted function are checked now, not traced."""
+    moments = jnp.array([1.0, 2.0, 3.0])
+    omega = jax.jit(lambda w: exact.solve(moments, Q0, w, jnp.array([0.0, 1.0]))[1])(
+        jnp.array([0.1, 1.0, 0.1])
+    )
+    assert omega.shape == (2, 3) and bool(jnp.all(jnp.isfinite(omega)))
+    bad = jnp.array([1.0, -1.0, 3.0])
+    with pytest.raises(ValueError, match="positive"):
+        jax.jit(lambda w: exact.prepare(bad, Q0, w).nu)(jnp.ones(3))
