@@ -1,0 +1,582 @@
+"""Principal-axis stability of torque-free rotation: maps over the sphere of spin directions.
+
+A body spun about its axis of largest or smallest moment keeps spinning about it; spun
+near the intermediate axis it turns over again and again (Problem 17.3, the Dzhanibekov
+effect). This module holds the pure, per-member functions behind a *stability map*: one
+initial angular velocity per direction on the sphere, one trajectory each, a few numbers
+per trajectory. Everything here is written for one member and ``vmap``-ped (or run with
+:func:`jrigid.ensemble.run`); nothing imports matplotlib (the drawing is in
+:mod:`jrigid.viz.stability`).
+
+Directions and scaling
+    :func:`fibonacci_sphere` (nearly uniform points), :func:`omega_at_energy`
+    (``ω = s d`` with ``2E = ω·Iω``).
+Per trajectory
+    :func:`axis_angle` / :func:`trajectory_summary`: the largest angle the principal axis
+    nearest to the initial ω moves from its initial direction in space, the number of flips
+    and the first flip time. A *flip* is a sign change of ``ω_k``, the body component of ω
+    along that axis ``k``. Since ``L_body = I ω`` in principal axes, ``sign ω_k =
+    sign(e_k · L)``: a flip is exactly the moment the body axis crosses the plane normal to
+    the conserved angular momentum, i.e. turns over relative to ``L`` — the two criteria of
+    a flip (body component of ω, projection of the axis on ``L``) coincide, and the first
+    needs no orientation.
+    :func:`ftle_exact` / :func:`ftle_simulate`: the finite-time Lyapunov exponent
+    ``log(σ_max(∂ω(T)/∂ω(0)))/T`` by forward-mode autodiff (``jax.jacfwd``) through the
+    closed-form motion (:mod:`jrigid.exact`) or through :func:`jrigid.simulate` with
+    ``diffrax.ForwardMode``.
+Closed form
+    :func:`encircled_axis` (the axis the polhode goes round), :func:`flips_expected`
+    (the nearest axis is not the encircled one: it must turn over), :func:`polhode` (the
+    intersection of the energy ellipsoid and the momentum sphere), :func:`flip_time_asymptotic`
+    (half-period between flips near the separatrix).
+Lockstep efficiency
+    :func:`lockstep_efficiency`, :func:`difficulty_order`: under ``vmap`` an adaptive loop
+    runs until its slowest member is done; grouping members of similar difficulty before
+    chunking recovers the wasted steps (``benchmarks/lockstep.py``).
+
+Flip time near the separatrix (derived in :func:`flip_time_asymptotic`): spun at ``|ω|``
+about the middle axis tilted by ``ε`` toward axis 3 (moments ``I1 < I2 < I3``), the time
+between flips is ``T ≈ (2/λ) ln(C/ε)`` with ``λ = |ω| √((I3−I2)(I2−I1)/(I1 I3))`` and
+``C = 4 √(I2(I2−I1)/(I3(I3−I1)))`` (toward axis 1: ``C = 4 √(I2(I3−I2)/(I1(I3−I1)))``);
+the relative error is ``O(ε²)``.
+
+Bad input: :func:`fibonacci_sphere` raises ``ValueError``; the other functions are meant
+for traced per-member use and do not check values (``jrigid.simulate`` checks its own).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import diffrax
+import jax
+import jax.numpy as jnp
+from jax.typing import ArrayLike
+
+from jrigid import exact, initial
+from jrigid import quaternion as quat
+from jrigid.body import RigidBody
+from jrigid.integrate import simulate
+from jrigid.scene import Scene
+
+__all__ = [
+    "axis_angle",
+    "difficulty_order",
+    "encircled_axis",
+    "fibonacci_sphere",
+    "flip_interval",
+    "flip_summary",
+    "flip_time_asymptotic",
+    "flips_expected",
+    "ftle_exact",
+    "ftle_simulate",
+    "lockstep_efficiency",
+    "map_member",
+    "nearest_axis",
+    "omega_at_energy",
+    "polhode",
+    "polhode_family",
+    "trajectory_summary",
+]
+
+
+# --------------------------------------------------------------------------- directions
+
+
+def fibonacci_sphere(n: int, dtype=None) -> jax.Array:
+    """``n`` nearly uniform unit vectors: the Fibonacci (golden-angle) lattice.
+
+    Point ``i`` has ``z = 1 − (2i + 1)/n`` and longitude ``i·π(3 − √5)``; every point
+    carries the area ``4π/n`` (equal-area in ``z``), none lies on a coordinate axis.
+
+    Args:
+        n: number of points, ``n ≥ 1``.
+        dtype: floating dtype (default: JAX's default float).
+
+    Returns:
+        ``(n, 3)`` unit vectors.
+    """
+    if not isinstance(n, int) or n < 1:
+        raise ValueError(f"fibonacci_sphere needs a positive int n, got {n!r}")
+    dtype = jnp.result_type(float) if dtype is None else dtype
+    i = jnp.arange(n, dtype=dtype)
+    z = 1.0 - (2.0 * i + 1.0) / n
+    r = jnp.sqrt(jnp.maximum(1.0 - z * z, 0.0))
+    phi = i * (math.pi * (3.0 - math.sqrt(5.0)))
+    return jnp.stack([r * jnp.cos(phi), r * jnp.sin(phi), z], axis=-1)
+
+
+def omega_at_energy(direction: ArrayLike, moments: ArrayLike, energy: ArrayLike) -> jax.Array:
+    """Angular velocity along ``direction`` with kinetic energy ``energy``: ``2E = ω·Iω``.
+
+    Args:
+        direction: ``(..., 3)`` non-zero body-frame direction (need not be unit).
+        moments: ``(..., 3)`` principal moments.
+        energy: ``(...)`` kinetic energy ``E > 0``.
+
+    Returns:
+        ``(..., 3)`` ``ω = d √(2E / (d·I d))``.
+    """
+    d, i, e = jnp.asarray(direction), jnp.asarray(moments), jnp.asarray(energy)
+    return d * jnp.sqrt(2.0 * e / jnp.sum(i * d * d, axis=-1))[..., None]
+
+
+def nearest_axis(omega: ArrayLike) -> jax.Array:
+    """Index ``0, 1, 2`` of the principal axis nearest to ``±ω`` (largest ``|ω_k|``).
+
+    Args:
+        omega: ``(..., 3)`` body angular velocity.
+
+    Returns:
+        ``(...)`` int32.
+    """
+    return jnp.argmax(jnp.abs(jnp.asarray(omega)), axis=-1).astype(jnp.int32)
+
+
+def _invariants(moments, omega):
+    """``(2E, L²)`` of body angular velocity ``omega``."""
+    i, w = jnp.asarray(moments), jnp.asarray(omega)
+    return jnp.sum(i * w * w, axis=-1), jnp.sum((i * w) ** 2, axis=-1)
+
+
+def encircled_axis(moments: ArrayLike, omega: ArrayLike) -> jax.Array:
+    """Index of the principal axis the polhode through ``omega`` goes round (closed form).
+
+    The axis of largest moment when ``L² > 2E I_mid``, the smallest when ``L² < 2E I_mid``
+    (Landau & Lifshitz §37). ``L² − 2E I_mid = Σ_k I_k (I_k − I_mid) ω_k²``; on the
+    separatrix (``= 0``) the largest is returned.
+
+    Args:
+        moments: ``(3,)`` distinct principal moments, any order.
+        omega: ``(3,)`` body angular velocity.
+
+    Returns:
+        ``()`` int32.
+    """
+    i, w = jnp.asarray(moments), jnp.asarray(omega)
+    order = jnp.argsort(i)
+    i_mid = i[order[1]]
+    delta = jnp.sum(i * (i - i_mid) * w * w)
+    return jnp.where(delta >= 0, order[2], order[0]).astype(jnp.int32)
+
+
+def flips_expected(moments: ArrayLike, omega: ArrayLike) -> jax.Array:
+    """Whether the axis nearest to ``ω`` must turn over relative to ``L`` (closed form).
+
+    True when the nearest principal axis is not the one the polhode encircles: its body
+    component of ω then oscillates about zero (``cn`` or ``sn``) and changes sign twice
+    per period of ω. This is the classification a long enough simulation must reproduce.
+
+    Args:
+        moments: ``(3,)`` distinct principal moments.
+        omega: ``(3,)`` body angular velocity.
+
+    Returns:
+        ``()`` bool.
+    """
+    return nearest_axis(omega) != encircled_axis(moments, omega)
+
+
+# --------------------------------------------------------------------------- per trajectory
+
+
+def axis_angle(q: ArrayLike, q0: ArrayLike, axis: ArrayLike) -> jax.Array:
+    """Angle between body axis ``axis`` in space at orientation ``q`` and at ``q0``.
+
+    Args:
+        q: ``(..., 4)`` orientations (body → space).
+        q0: ``(4,)`` initial orientation.
+        axis: ``()`` int, principal axis index.
+
+    Returns:
+        ``(...)`` angle in ``[0, π]`` (``atan2(|a×a0|, a·a0)``, accurate at both ends).
+    """
+    q, q0 = jnp.asarray(q), jnp.asarray(q0)
+    e = jax.nn.one_hot(axis, 3, dtype=q.dtype)
+    a0 = quat.rotate(q0, e)
+    a = quat.rotate(q, jnp.broadcast_to(e, q.shape[:-1] + (3,)))
+    a0 = jnp.broadcast_to(a0, a.shape)
+    return jnp.arctan2(jnp.linalg.norm(jnp.cross(a, a0), axis=-1), jnp.sum(a * a0, axis=-1))
+
+
+def _sign_changes(a, b):
+    """Consecutive samples on different sides of zero (``0`` counts as positive; a
+    non-finite sample never counts)."""
+    return ((a >= 0) != (b >= 0)) & jnp.isfinite(a) & jnp.isfinite(b)
+
+
+def flip_summary(ts: ArrayLike, x: ArrayLike) -> tuple[jax.Array, jax.Array]:
+    """Number of sign changes of the samples ``x`` and the first one's time.
+
+    Args:
+        ts: ``(T,)`` sample times.
+        x: ``(T,)`` samples (``NaN`` samples never count; ``0`` counts as positive).
+
+    Returns:
+        ``(count, first)``: ``()`` int32 and ``()`` float, the first crossing time by
+        linear interpolation between samples (``inf`` if there is none).
+    """
+    ts, x = jnp.asarray(ts), jnp.asarray(x)
+    a, b = x[:-1], x[1:]
+    change = _sign_changes(a, b)
+    count = jnp.sum(change).astype(jnp.int32)
+    k = jnp.argmax(change)
+    den = jnp.where(b[k] != a[k], b[k] - a[k], 1.0)
+    t_cross = ts[k] - a[k] * (ts[k + 1] - ts[k]) / den
+    return count, jnp.where(count > 0, t_cross, jnp.inf)
+
+
+def flip_interval(ts: ArrayLike, x: ArrayLike) -> tuple[jax.Array, jax.Array]:
+    """Mean spacing of the sign changes of the samples ``x`` (the time between flips).
+
+    Crossing times are interpolated linearly between samples; the spacing is
+    ``(last − first)/(count − 1)``.
+
+    Args:
+        ts: ``(T,)`` sample times.
+        x: ``(T,)`` samples.
+
+    Returns:
+        ``(interval, count)``: ``()`` float (``NaN`` with fewer than two crossings) and
+        ``()`` int32.
+    """
+    ts, x = jnp.asarray(ts), jnp.asarray(x)
+    a, b = x[:-1], x[1:]
+    change = _sign_changes(a, b)
+    den = jnp.where(change, b - a, 1.0)
+    t_cross = ts[:-1] - a * (ts[1:] - ts[:-1]) / den
+    count = jnp.sum(change).astype(jnp.int32)
+    first = jnp.min(jnp.where(change, t_cross, jnp.inf))
+    last = jnp.max(jnp.where(change, t_cross, -jnp.inf))
+    ok = count >= 2
+    interval = jnp.where(ok, (last - first) / jnp.where(ok, count - 1, 1), jnp.nan)
+    return interval, count
+
+
+def trajectory_summary(ts: ArrayLike, q: ArrayLike, omega: ArrayLike) -> dict[str, jax.Array]:
+    """Stability numbers of one sampled trajectory, about the axis nearest to ``ω(0)``.
+
+    Args:
+        ts: ``(T,)`` times.
+        q: ``(T, 4)`` orientations.
+        omega: ``(T, 3)`` body angular velocities.
+
+    Returns:
+        dict of scalars: ``axis`` (nearest principal axis to ``ω(0)``), ``max_axis_angle``
+        (largest angle in rad that axis moves from its initial direction in space, over the
+        samples), ``flips`` (sign changes of ``ω_axis``, i.e. of the axis' projection on
+        ``L``) and ``first_flip`` (time of the first, ``inf`` if none).
+    """
+    q, omega = jnp.asarray(q), jnp.asarray(omega)
+    k = nearest_axis(omega[0])
+    angle = axis_angle(q, q[0], k)
+    w_k = jnp.take_along_axis(omega, jnp.broadcast_to(k, (omega.shape[0], 1)), axis=1)[:, 0]
+    count, first = flip_summary(ts, w_k)
+    return dict(axis=k, max_axis_angle=jnp.max(angle), flips=count, first_flip=first)
+
+
+def _log_sigma_max(jac: jax.Array) -> jax.Array:
+    return jnp.log(jnp.linalg.svd(jac, compute_uv=False)[0])
+
+
+def ftle_exact(moments: ArrayLike, omega0: ArrayLike, t: ArrayLike) -> jax.Array:
+    """Finite-time Lyapunov exponent of Euler's equations from the closed-form motion.
+
+    ``FTLE = log σ_max(J)/t`` with ``J = ∂ω(t)/∂ω(0)`` (``3×3``, dimensionless) by
+    ``jax.jacfwd`` through :func:`jrigid.exact.solve`. In the stable regions ``J`` grows
+    at most linearly (the period depends on the amplitude), so the FTLE decays like
+    ``log(t)/t``; near the separatrix it is close to the saddle's rate
+    ``λ = |ω| √((I3−I2)(I2−I1)/(I1 I3))`` for times up to the first flip.
+    Only ω is used, not the orientation: the orientation's phase grows linearly in ``t``
+    for every direction and would add the same ``log(t)/t`` floor everywhere.
+
+    Args:
+        moments: ``(3,)`` principal moments.
+        omega0: ``(3,)`` initial body angular velocity (not exactly on a principal axis,
+            where the closed form's derivative is that of the steady spin).
+        t: ``()`` horizon ``> 0``.
+
+    Returns:
+        ``()`` FTLE in 1/time.
+    """
+    moments, omega0 = jnp.asarray(moments), jnp.asarray(omega0)
+    t = jnp.asarray(t, dtype=omega0.dtype)
+    q0 = quat.identity(dtype=omega0.dtype)
+    # Tie the moments to the traced ω0, so exact.prepare sees a tracer (not a concrete
+    # array captured by jit) and skips its concrete-value check.
+    moments = moments * jnp.ones_like(omega0)
+
+    def final(w):
+        return exact.solve(moments, q0, w, t[None])[1][0]
+
+    return _log_sigma_max(jax.jacfwd(final)(omega0)) / t
+
+
+def ftle_simulate(
+    moments: ArrayLike,
+    omega0: ArrayLike,
+    t: ArrayLike,
+    *,
+    rtol: ArrayLike = 1e-10,
+    atol: ArrayLike = 1e-12,
+    solver: diffrax.AbstractSolver | None = None,
+    max_steps: int = 100_000,
+    formulation: str = "body_omega",
+) -> jax.Array:
+    """:func:`ftle_exact` computed by forward-mode autodiff through :func:`jrigid.simulate`.
+
+    ``jax.jacfwd`` of ``ω(t)`` with respect to ``ω(0)`` through the adaptive solve with
+    ``adjoint=diffrax.ForwardMode()`` (three tangent solves alongside the primal).
+
+    Args:
+        moments: ``(3,)`` principal moments.
+        omega0: ``(3,)`` initial body angular velocity.
+        t: ``()`` horizon ``> 0``.
+        rtol, atol: tolerances of the solve.
+        solver: diffrax solver (default ``Tsit5``).
+        max_steps: step budget.
+        formulation: static, :func:`jrigid.simulate`'s formulation; the default
+            ``"body_omega"`` integrates Euler's equations alone (ω needs no orientation).
+
+    Returns:
+        ``()`` FTLE in 1/time.
+    """
+    moments, omega0 = jnp.asarray(moments), jnp.asarray(omega0)
+    t = jnp.asarray(t, dtype=omega0.dtype)
+    scene = Scene(RigidBody(moments))
+    ts = jnp.stack([jnp.zeros_like(t), t])
+
+    def final(w):
+        traj = simulate(
+            scene,
+            initial.from_omega(None, w),
+            ts,
+            rtol=rtol,
+            atol=atol,
+            solver=solver,
+            adjoint=diffrax.ForwardMode(),
+            max_steps=max_steps,
+            formulation=formulation,
+            throw=False,
+        )
+        return traj.omega[-1]
+
+    return _log_sigma_max(jax.jacfwd(final)(omega0)) / t
+
+
+def map_member(
+    moments: ArrayLike,
+    omega0: ArrayLike,
+    ts: ArrayLike,
+    ftle_time: ArrayLike,
+    *,
+    rtol: ArrayLike | None = None,
+    atol: ArrayLike | None = None,
+    solver: diffrax.AbstractSolver | None = None,
+    max_steps: int = 100_000,
+) -> dict[str, jax.Array]:
+    """Everything a stability map records for one initial angular velocity.
+
+    Simulates the torque-free body (:func:`jrigid.simulate`, identity initial orientation,
+    ``throw=False``), summarises the samples (:func:`trajectory_summary`), adds the FTLE
+    over ``ftle_time`` (:func:`ftle_exact`), the closed-form classification
+    (:func:`flips_expected`) and the solver's step count.
+
+    Args:
+        moments: ``(3,)`` principal moments.
+        omega0: ``(3,)`` initial body angular velocity.
+        ts: ``(T,)`` output times (flips and angles are read at these samples).
+        ftle_time: ``()`` FTLE horizon.
+        rtol, atol, solver, max_steps: passed to :func:`jrigid.simulate` (default
+            tolerances: simulate's, ``1e-8``/``1e-10`` in float64).
+
+    Returns:
+        dict of scalars: the keys of :func:`trajectory_summary` plus ``ftle``,
+        ``flips_expected``, ``num_steps`` (accepted + rejected) and ``result``
+        (:class:`jrigid.integrate.Result` code).
+    """
+    moments, omega0 = jnp.asarray(moments), jnp.asarray(omega0)
+    traj = simulate(
+        Scene(RigidBody(moments)),
+        initial.from_omega(None, omega0),
+        ts,
+        rtol=rtol,
+        atol=atol,
+        solver=solver,
+        max_steps=max_steps,
+        throw=False,
+    )
+    out = trajectory_summary(traj.ts, traj.q, traj.omega)
+    out["ftle"] = ftle_exact(moments, omega0, ftle_time)
+    out["flips_expected"] = flips_expected(moments, omega0)
+    out["num_steps"] = traj.stats["num_steps"]
+    out["result"] = traj.result
+    return out
+
+
+# --------------------------------------------------------------------------- closed form
+
+
+@functools.partial(jax.jit, static_argnames=("n",))
+def polhode(moments: ArrayLike, omega0: ArrayLike, n: int = 200) -> jax.Array:
+    """The polhode through ``omega0``: ``n`` points of ``{ω·Iω = 2E, |Iω|² = L²}``.
+
+    With ``c`` the encircled axis (:func:`encircled_axis`) and ``a, b`` the other two,
+    eliminating ``ω_c`` from the two quadrics leaves the ellipse
+    ``I_a(I_c−I_a) ω_a² + I_b(I_c−I_b) ω_b² = 2E I_c − L²``, parametrised
+    ``ω_a = A cos φ``, ``ω_b = B sin φ``; then ``ω_c = σ √((2E − I_a ω_a² − I_b ω_b²)/I_c)``
+    with ``σ = sign ω0_c``. Closed curve, ``φ ∈ [0, 2π]`` (first point = last).
+
+    Args:
+        moments: ``(3,)`` distinct principal moments.
+        omega0: ``(3,)`` a point of the polhode (body angular velocity).
+        n: static number of points.
+
+    Returns:
+        ``(n, 3)`` body angular velocities on both surfaces.
+    """
+    i, w = jnp.asarray(moments), jnp.asarray(omega0)
+    two_e, l2 = _invariants(i, w)
+    c = encircled_axis(i, w)
+    a, b = (c + 1) % 3, (c + 2) % 3
+    ia, ib, ic = i[a], i[b], i[c]
+    rhs = two_e * ic - l2
+    amp_a = jnp.sqrt(jnp.maximum(rhs / (ia * (ic - ia)), 0.0))
+    amp_b = jnp.sqrt(jnp.maximum(rhs / (ib * (ic - ib)), 0.0))
+    phi = jnp.linspace(0.0, 2.0 * math.pi, n, dtype=w.dtype)
+    wa, wb = amp_a * jnp.cos(phi), amp_b * jnp.sin(phi)
+    sigma = jnp.where(w[c] >= 0, 1.0, -1.0)
+    wc = sigma * jnp.sqrt(jnp.maximum((two_e - ia * wa * wa - ib * wb * wb) / ic, 0.0))
+    cols = jnp.stack([wa, wb, wc], axis=-1)  # columns for axes a, b, c
+    perm = jnp.stack([a, b, c])
+    inv = jnp.argsort(perm)
+    return cols[:, inv]
+
+
+@functools.partial(jax.jit, static_argnames=("levels", "n"))
+def polhode_family(moments: ArrayLike, levels: int = 7, n: int = 200) -> jax.Array:
+    """Polhodes at unit energy for drawing, with the separatrix.
+
+    Every polhode crosses the plane of the smallest and largest axes, so the seeds lie
+    there: ``levels`` angles between the smallest axis and the separatrix's crossing
+    (``tan α = √(I1(I2−I1)/(I3(I3−I2)))`` from the smallest axis), ``levels`` between it
+    and the largest axis, and the crossing itself; each seed and its negative.
+
+    Args:
+        moments: ``(3,)`` distinct principal moments (any order).
+        levels: static number of polhodes per side of the separatrix.
+        n: static number of points per curve.
+
+    Returns:
+        ``(4 levels + 2, n, 3)`` body angular velocities (``2E = 1``); curves
+        ``2 levels`` and ``4 levels + 1`` are the separatrix (two arcs each, meeting at
+        ``±`` the intermediate axis).
+    """
+    i = jnp.asarray(moments)
+    order = jnp.argsort(i)
+    lo, hi = order[0], order[2]
+    i1, i2, i3 = i[lo], i[order[1]], i[hi]
+    sep = jnp.arctan(jnp.sqrt(i1 * (i2 - i1) / (i3 * (i3 - i2))))  # angle from the lo axis
+    frac = (jnp.arange(levels, dtype=i.dtype) + 0.5) / levels
+    angles = jnp.concatenate([sep * frac, sep + (0.5 * math.pi - sep) * frac, sep[None]])
+    e_lo = jax.nn.one_hot(lo, 3, dtype=i.dtype)
+    e_hi = jax.nn.one_hot(hi, 3, dtype=i.dtype)
+    seeds = jnp.cos(angles)[:, None] * e_lo[None, :] + jnp.sin(angles)[:, None] * e_hi[None, :]
+    seeds = jnp.concatenate([seeds, -seeds])
+    seeds = omega_at_energy(
+        seeds, jnp.broadcast_to(i, seeds.shape), jnp.full(seeds.shape[:1], 0.5, i.dtype)
+    )
+    return jax.vmap(lambda w: polhode(i, w, n))(seeds)
+
+
+def flip_time_asymptotic(
+    moments: ArrayLike, speed: ArrayLike, eps: ArrayLike, toward: str = "largest"
+) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """Half-period between flips near the separatrix: ``T ≈ (2/λ) ln(C/ε)``.
+
+    Spin ``|ω| = speed`` about the intermediate axis tilted by ``ε`` toward the largest
+    (or smallest) axis. With sorted moments ``I1 < I2 < I3`` the exact half-period is
+    ``2K(m)/λ_m`` (:func:`jrigid.exact.omega_period` / 2). As ``ε → 0``:
+    ``λ_m → λ = |ω| √((I3−I2)(I2−I1)/(I1 I3))``, the linear growth rate about the middle
+    axis, and ``1 − m = I3(I3−I1) ε²/(I2(I2−I1))`` (toward the largest axis; toward the
+    smallest ``I1(I3−I1) ε²/(I2(I3−I2))``), both to ``O(ε²)``. With
+    ``K(m) = ln(4/√(1−m)) + O((1−m) ln(1−m))``,
+
+        T = (2/λ) ln(C/ε) (1 + O(ε²)),
+        C = 4 √(I2(I2−I1)/(I3(I3−I1)))   (toward the largest),
+        C = 4 √(I2(I3−I2)/(I1(I3−I1)))   (toward the smallest).
+
+    Args:
+        moments: ``(3,)`` distinct principal moments, any order.
+        speed: ``()`` ``|ω|``.
+        eps: ``(...)`` tilt angle(s) in radians.
+        toward: ``"largest"`` or ``"smallest"`` (static).
+
+    Returns:
+        ``(T, λ, C)``: ``T`` of the shape of ``eps``, ``λ`` and ``C`` scalars.
+    """
+    if toward not in ("largest", "smallest"):
+        raise ValueError(f"toward must be 'largest' or 'smallest', got {toward!r}")
+    s = jnp.sort(jnp.asarray(moments))
+    i1, i2, i3 = s[0], s[1], s[2]
+    lam = jnp.asarray(speed) * jnp.sqrt((i3 - i2) * (i2 - i1) / (i1 * i3))
+    if toward == "largest":
+        const = 4.0 * jnp.sqrt(i2 * (i2 - i1) / (i3 * (i3 - i1)))
+    else:
+        const = 4.0 * jnp.sqrt(i2 * (i3 - i2) / (i1 * (i3 - i1)))
+    return 2.0 / lam * jnp.log(const / jnp.asarray(eps)), lam, const
+
+
+# --------------------------------------------------------------------------- lockstep
+
+
+def lockstep_efficiency(
+    steps: ArrayLike, chunk_size: int, order: ArrayLike | None = None
+) -> jax.Array:
+    """Useful fraction of the steps a chunked ``vmap`` of adaptive solves executes.
+
+    Under ``vmap`` diffrax's loop runs until the slowest member of a chunk is done, so a
+    chunk of ``n`` members needing ``s_i`` steps executes ``n · max s_i`` member-steps.
+    Efficiency ``= Σ s_i / Σ_chunks (n_chunk · max_chunk s_i)`` (a padded last chunk's
+    padding is not counted).
+
+    Args:
+        steps: ``(N,)`` steps each member needs (``Trajectory.stats["num_steps"]``).
+        chunk_size: static members per chunk.
+        order: ``(N,)`` permutation applied before chunking (e.g. :func:`difficulty_order`);
+            default the given order.
+
+    Returns:
+        ``()`` efficiency in ``(0, 1]``.
+    """
+    s = jnp.asarray(steps, dtype=jnp.result_type(float))
+    if order is not None:
+        s = s[jnp.asarray(order)]
+    n = s.shape[0]
+    n_chunks = -(-n // chunk_size)
+    pad = n_chunks * chunk_size - n
+    padded = jnp.concatenate([s, jnp.full((pad,), -jnp.inf, s.dtype)]).reshape(n_chunks, -1)
+    counts = jnp.sum(jnp.isfinite(padded), axis=1)
+    executed = jnp.sum(counts * jnp.max(padded, axis=1))
+    return jnp.sum(s) / executed
+
+
+def difficulty_order(difficulty: ArrayLike) -> jax.Array:
+    """Permutation grouping members of similar predicted difficulty (stable ``argsort``).
+
+    Chunk the members in this order, then scatter the outputs back with
+    ``out[order] = chunked_out`` (or run with ``inputs[order]`` and invert with
+    ``jnp.argsort(order)``).
+
+    Args:
+        difficulty: ``(N,)`` predicted cost per member (a pilot solve's step count, or a
+            closed-form proxy). Only the ranking matters. For torque-free maps
+            ``|L|² = |Iω|²`` is free and ranks Tsit5's step counts well
+            (``benchmarks/lockstep.py``: correlation +0.90 at fixed ``|ω|``, −0.85 at
+            fixed energy; 0.6 for the number of ω periods, 0.97 for a pilot solve).
+
+    Returns:
+        ``(N,)`` int permutation, easiest first.
+    """
+    return jnp.argsort(jnp.asarray(difficulty), stable=True)

@@ -1,0 +1,301 @@
+"""Stability maps (jrigid.stability) against closed-form theory, scipy and mpmath.
+
+Anchors: the polhode is the intersection of ``ω·Iω = 2E`` and ``|Iω|² = L²``; the axis
+the polhode encircles is the largest when ``L² > 2E I_mid`` (Landau & Lifshitz §37); the
+time between flips is ``2K(m)/λ_m`` (computed here with mpmath) and tends to
+``(2/λ) ln(C/ε)``; rotations of body axes are compared with scipy's ``Rotation``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+import mpmath
+import numpy as np
+import pytest
+from _experiments import assert_listed_and_written, run_quick
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.integrate import solve_ivp
+from scipy.spatial.transform import Rotation
+
+from jrigid import stability
+
+# Bodies (I1, I2, I3) with distinct moments: a box of sides 1, 2, 3, a T-handle-like body
+# and a near-symmetric one (I1 ≈ I2).
+BODIES = {
+    "box": np.array([13.0, 10.0, 5.0]) / 12.0,
+    "t_handle": np.array([0.3, 0.8, 1.0]),
+    "near_symmetric": np.array([0.62, 0.66, 1.0]),
+}
+
+
+def _tilted(k: int, other: int, sign: float, deg: float) -> np.ndarray:
+    w = np.zeros(3)
+    w[k] = math.cos(math.radians(deg))
+    w[other] = sign * math.sin(math.radians(deg))
+    return w
+
+
+# --------------------------------------------------------------------------- directions
+
+
+def test_fibonacci_directions_are_unit_and_uniform():
+    n = 4000
+    d = np.asarray(stability.fibonacci_sphere(n))
+    assert d.shape == (n, 3)
+    np.testing.assert_allclose(np.linalg.norm(d, axis=1), 1.0, atol=1e-14)
+    # a spherical cap of half-angle θ holds the fraction (1 − cos θ)/2 of a uniform sample
+    rng = np.random.default_rng(0)
+    for axis in rng.normal(size=(6, 3)):
+        axis /= np.linalg.norm(axis)
+        for theta in (0.3, 1.0, 2.0):
+            frac = np.mean(d @ axis > math.cos(theta))
+            assert frac == pytest.approx((1 - math.cos(theta)) / 2, abs=3e-3)
+    assert np.linalg.norm(d.mean(axis=0)) < 1e-3
+    with pytest.raises(ValueError, match="positive int"):
+        stability.fibonacci_sphere(0)
+
+
+def test_omega_at_energy_has_the_energy_and_direction():
+    d = np.asarray(stability.fibonacci_sphere(50))
+    mom = BODIES["box"]
+    w = np.asarray(stability.omega_at_energy(d, np.broadcast_to(mom, d.shape), np.full(50, 0.7)))
+    np.testing.assert_allclose(np.sum(mom * w * w, axis=1), 1.4, rtol=1e-14)
+    np.testing.assert_allclose(w / np.linalg.norm(w, axis=1, keepdims=True), d, atol=1e-14)
+
+
+# --------------------------------------------------------------------------- per trajectory
+
+
+def test_flip_summary_and_interval_of_a_sine():
+    ts = np.linspace(0.0, 10.0, 2001)
+    x = np.sin(2 * math.pi * (ts - 0.3) / 4.0)  # zeros at 0.3, 2.3, 4.3, 6.3, 8.3
+    count, first = stability.flip_summary(ts, x)
+    assert int(count) == 5 and float(first) == pytest.approx(0.3, abs=1e-6)
+    interval, count = stability.flip_interval(ts, x)
+    assert int(count) == 5 and float(interval) == pytest.approx(2.0, abs=1e-6)
+    count, first = stability.flip_summary(ts, 1.0 + 0.5 * np.sin(ts))
+    assert int(count) == 0 and math.isinf(float(first))
+    assert math.isnan(float(stability.flip_interval(ts, np.cos(ts / 5))[0]))  # one zero only
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(0, 2))
+def test_axis_angle_matches_scipy(seed, axis):
+    rot = Rotation.random(5, random_state=seed)
+    q = jnp.asarray(rot.as_quat(scalar_first=True))
+    got = np.asarray(stability.axis_angle(q, q[0], axis))
+    e = np.eye(3)[axis]
+    a = rot.apply(e)
+    want = np.arccos(np.clip(a @ a[0], -1.0, 1.0))
+    np.testing.assert_allclose(got, want, atol=1e-7)
+
+
+def _euler_fd_ftle(mom, w0, t, h=1e-6):
+    """FTLE from central differences of scipy's DOP853 solution of Euler's equations."""
+    i1, i2, i3 = mom
+
+    def rhs(_, w):
+        return [
+            (i2 - i3) * w[1] * w[2] / i1,
+            (i3 - i1) * w[2] * w[0] / i2,
+            (i1 - i2) * w[0] * w[1] / i3,
+        ]
+
+    def final(w):
+        return solve_ivp(rhs, (0.0, t), w, method="DOP853", rtol=1e-13, atol=1e-15).y[:, -1]
+
+    jac = np.stack([(final(w0 + h * e) - final(w0 - h * e)) / (2 * h) for e in np.eye(3)], 1)
+    return math.log(np.linalg.svd(jac, compute_uv=False)[0]) / t
+
+
+@pytest.fixture(scope="module")
+def ftle_solver():
+    """``ftle_simulate`` (jacfwd through diffrax) for six (body, ω, T), one compiled program."""
+    box, th = BODIES["box"], BODIES["t_handle"]
+    cases = [
+        (th, _tilted(1, 2, 1.0, 2.0), 15.0),  # near the separatrix
+        (th, _tilted(2, 0, 1.0, 20.0), 15.0),  # stable, largest axis
+        (box, _tilted(0, 1, 1.0, 5.0), 50.0),  # 5° from the largest axis of the box ...
+        (box, _tilted(0, 1, 1.0, 5.0), 500.0),
+        (box, _tilted(0, 1, 1.0, 5.0), 3000.0),
+        (box, _tilted(1, 0, 1.0, 1e-4), 10.0),  # 1e-4 rad from its intermediate axis
+    ]
+    mom, w, t = (jnp.asarray(np.stack([c[k] for c in cases])) for k in range(3))
+    run = jax.jit(
+        jax.vmap(lambda m, w, t: stability.ftle_simulate(m, w, t, rtol=1e-11, atol=1e-13))
+    )
+    return cases, np.asarray(run(mom, w, t))
+
+
+def test_ftle_through_the_solver_matches_scipy_finite_differences(ftle_solver):
+    cases, ftle = ftle_solver
+    for (mom, w, t), got in list(zip(cases, ftle, strict=True))[:2]:
+        assert got == pytest.approx(_euler_fd_ftle(mom, w, t), rel=1e-5, abs=1e-7)
+
+
+def test_ftle_stable_near_zero_separatrix_positive(ftle_solver):
+    _, ftle = ftle_solver
+    s = np.sort(BODIES["box"])
+    lam = math.sqrt((s[2] - s[1]) * (s[1] - s[0]) / (s[0] * s[2]))
+    # stable: |J| grows at most linearly, so the FTLE decays like log(t)/t
+    assert 0.0 <= ftle[4] < ftle[3] < ftle[2] < 0.1 * lam
+    assert ftle[4] * 3000.0 < 2.0 * ftle[3] * 500.0  # logarithmic growth of log σ, not linear
+    # near the separatrix, before the first flip (≈ (1/λ) ln(1/ε) ≈ 19): the saddle rate
+    assert 0.8 * lam < ftle[5] < 1.05 * lam
+
+
+# --------------------------------------------------------------------------- closed form
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    st.floats(0.2, 0.95),
+    st.floats(0.02, 0.95),
+    st.integers(0, 2**31 - 1),
+)
+def test_polhode_lies_on_the_ellipsoid_and_the_sphere(i1, frac, seed):
+    i2 = i1 + frac * (1.0 - i1)  # i1 < i2 < 1 = i3, and i1 + i2 > 1 not needed here
+    mom = np.random.default_rng(seed).permutation([i1, i2, 1.0])
+    w0 = np.random.default_rng(seed + 1).normal(size=3)
+    curve = np.asarray(stability.polhode(mom, w0, 400))
+    two_e, l2 = np.sum(mom * w0 * w0), np.sum((mom * w0) ** 2)
+    np.testing.assert_allclose(np.sum(mom * curve**2, axis=1), two_e, rtol=1e-11)
+    np.testing.assert_allclose(np.sum((mom * curve) ** 2, axis=1), l2, rtol=1e-11)
+    # it passes through ω0 (up to the spacing of the points) and keeps the sign of ω_c
+    assert np.min(np.linalg.norm(curve - w0, axis=1)) < 0.05 * np.linalg.norm(w0)
+    c = int(stability.encircled_axis(mom, w0))
+    assert np.all(np.sign(curve[:, c]) == np.sign(w0[c]))
+    # ... and goes round axis c: both other components change sign along the curve
+    for k in {0, 1, 2} - {c}:
+        assert curve[:, k].min() < 0 < curve[:, k].max()
+
+
+def test_polhode_family_covers_both_regions():
+    mom = BODIES["box"]
+    curves = np.asarray(stability.polhode_family(mom, levels=4, n=100))
+    assert curves.shape == (18, 100, 3)
+    two_e = np.sum(mom * curves**2, axis=2)
+    np.testing.assert_allclose(two_e, 1.0, rtol=1e-12)
+    l2 = np.sum((mom * curves) ** 2, axis=2)
+    assert np.ptp(l2, axis=1).max() < 1e-12
+    i_mid = np.median(mom)
+    # curves 0..3 round the smallest axis, 4..7 the largest, 8 the separatrix
+    assert np.all(l2[:4, 0] < i_mid) and np.all(l2[4:8, 0] > i_mid)
+    assert l2[8, 0] == pytest.approx(i_mid, rel=1e-12)
+
+
+@pytest.mark.parametrize("toward", ["largest", "smallest"])
+@pytest.mark.parametrize("name", list(BODIES))
+def test_flip_time_asymptote_against_mpmath(name, toward):
+    mom = BODIES[name]
+    a, b, c = np.sort(mom)
+    mpmath.mp.dps = 40
+    for eps in (1e-2, 1e-4):
+        # exact 2K(m)/λ_m for ω = (sin ε or 0, cos ε, 0 or sin ε) in sorted axes, |ω| = 1
+        e_ = mpmath.mpf(eps)
+        w1, w2, w3 = (
+            (0, mpmath.cos(e_), mpmath.sin(e_))
+            if toward == "largest"
+            else (mpmath.sin(e_), mpmath.cos(e_), 0)
+        )
+        A, B, C = (mpmath.mpf(float(x)) for x in (a, b, c))
+        two_e = A * w1**2 + B * w2**2 + C * w3**2
+        l2 = (A * w1) ** 2 + (B * w2) ** 2 + (C * w3) ** 2
+        if l2 > two_e * B:
+            lam = mpmath.sqrt((C - B) * (l2 - two_e * A) / (A * B * C))
+            m = (B - A) * (two_e * C - l2) / ((C - B) * (l2 - two_e * A))
+        else:
+            lam = mpmath.sqrt((B - A) * (two_e * C - l2) / (A * B * C))
+            m = (C - B) * (l2 - two_e * A) / ((B - A) * (two_e * C - l2))
+        exact_t = float(2 * mpmath.ellipk(m) / lam)
+        t, rate, const = stability.flip_time_asymptotic(mom, 1.0, eps, toward)
+        assert float(rate) == pytest.approx(math.sqrt((c - b) * (b - a) / (a * c)), rel=1e-14)
+        assert abs(float(t) / exact_t - 1) < 5 * eps**2 * (1 + abs(math.log(eps)))
+
+
+def test_closed_form_helpers_in_float32(float32):
+    d = stability.fibonacci_sphere(100)
+    assert d.dtype == jnp.float32
+    np.testing.assert_allclose(np.linalg.norm(np.asarray(d), axis=1), 1.0, atol=1e-6)
+    mom = jnp.asarray(BODIES["box"], dtype=jnp.float32)
+    w0 = jnp.asarray([0.3, 0.2, 0.9], dtype=jnp.float32)
+    curve = np.asarray(stability.polhode(mom, w0, 64))
+    assert curve.dtype == np.float32
+    two_e = float(np.sum(np.asarray(mom) * np.asarray(w0) ** 2))
+    np.testing.assert_allclose(np.sum(np.asarray(mom) * curve**2, axis=1), two_e, rtol=1e-5)
+
+
+# --------------------------------------------------------------------------- lockstep
+
+
+def test_lockstep_efficiency_by_hand():
+    steps = np.array([1, 10, 1, 10])
+    assert float(stability.lockstep_efficiency(steps, 2)) == pytest.approx(22 / 40)
+    order = stability.difficulty_order(steps)
+    assert float(stability.lockstep_efficiency(steps, 2, order)) == pytest.approx(1.0)
+    # a padded last chunk counts only its members
+    assert float(stability.lockstep_efficiency(np.array([4, 2, 3]), 2)) == pytest.approx(9 / 11)
+
+
+# --------------------------------------------------------------------------- experiments
+
+NAMES = ("stability_map", "stability_bodies")
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory):
+    return run_quick(tmp_path_factory, NAMES)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_listed_and_writes_outputs(name, results):
+    assert_listed_and_written(name, results)
+
+
+def test_stability_map_quick_shows_the_unstable_middle_axis(results):
+    num, folder = results["stability_map"]
+    assert num["all_succeeded"]
+    assert num["classification_agreement"] == 1.0
+    caps = num["cap_fraction_unstable"]
+    assert caps["smallest"] == 0.0 and caps["largest"] == 0.0 and caps["intermediate"] == 1.0
+    ftle = num["cap_ftle"]
+    assert ftle["intermediate"]["median"] > 3 * max(
+        ftle["smallest"]["median"], ftle["largest"]["median"]
+    )
+    assert list((folder / "chunks").glob("chunk_*.npz")), "ensemble chunks not written"
+
+
+def test_stability_map_quick_ftle_near_axes(results):
+    num, _ = results["stability_map"]
+    lam, ftle = num["saddle_rate_lambda"], num["cap_ftle"]
+    # one rotation period: near the stable axes log(σ)/T stays small, near the middle
+    # axis perturbations grow at close to the saddle rate λ
+    assert ftle["smallest"]["max"] < 0.25 * lam and ftle["largest"]["max"] < 0.25 * lam
+    assert 0.6 * lam < ftle["intermediate"]["median"] < 1.05 * lam
+
+
+def test_bodies_quick_classify_the_axes_of_three_bodies(results):
+    num, _ = results["stability_bodies"]
+    bodies = np.asarray(num["bodies"])
+    assert len(bodies) == 3 and np.min(np.diff(bodies[:, :2], axis=1)) < 0.05  # near-symmetric
+    assert num["axis_checks"] == 36 and num["all_checks_succeeded"]
+    assert num["axis_checks_middle_flips"] and num["axis_checks_others_never_flip"]
+    assert num["axis_checks_agree_with_closed_form"]
+
+
+def test_grouping_raises_lockstep_efficiency(results):
+    num, _ = results["stability_bodies"]
+    # members of very different length (step counts from a few hundred to ~10⁴), chunks of 8
+    assert num["lockstep_efficiency_grouped"] > num["lockstep_efficiency_random_order"] + 0.15
+
+
+def test_stability_bodies_quick_flip_period(results):
+    num, _ = results["stability_bodies"]
+    assert num["all_succeeded"] and num["min_crossings"] >= 2
+    assert num["max_rel_error_simulated_vs_exact"] < 1e-5
+    assert 1.7 < num["asymptotic_error_slope_vs_log_eps"] < 2.3
+    assert num["max_rel_error_asymptotic_vs_exact"]["0.001"] < 1e-4
