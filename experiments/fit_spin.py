@@ -25,7 +25,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jrigid import fit, initial
+from jrigid import fit, initial, viz
 from jrigid import quaternion as quat
 from jrigid.body import RigidBody
 from jrigid.integrate import simulate
@@ -44,6 +44,36 @@ def _make_build(lever_known: float | None):
         return Scene(body, Pivot(), Gravity(9.81)), initial.from_omega(q0, theta["omega0"])
 
     return build
+
+
+def _figure(rep, problem, params, ts, data, axis_true, names, true, est, sig) -> None:
+    """Estimates ± σ against the truth; the tracked axis, data against the fit."""
+    pred = problem.predict(params)
+    axis_fit = np.asarray(
+        quat.rotate(pred.q, jnp.broadcast_to(jnp.eye(3)[2], pred.q.shape[:-1] + (3,)))
+    )
+    fig = viz.new_figure(figsize=(11, 3.4))
+    ax = fig.add_subplot(1, 2, 1)
+    z = (est - true) / sig
+    ax.axhspan(-3, 3, color="0.9", label="±3σ")
+    ax.errorbar(np.arange(len(names)), z, yerr=np.ones_like(z), fmt="o", capsize=3,
+                label="(estimate − truth)/σ ± 1")  # fmt: skip
+    ax.axhline(0.0, color="k", lw=0.8)
+    ax.set_xticks(np.arange(len(names)), names)
+    ax.set_ylabel("(estimate − truth) / σ")
+    ax.set_title("estimates ± σ against the truth", fontsize=9)
+    ax.legend(fontsize=7)
+    ax = fig.add_subplot(1, 2, 2)
+    t_fit = np.asarray(problem.ts)
+    for k, c in zip(range(2), ("C0", "C1"), strict=True):
+        ax.plot(ts, data[:, k], ".", color=c, ms=4, label=f"camera, axis {'xy'[k]}")
+        ax.plot(t_fit, axis_fit[:, k], "-", color=c, lw=1, label=f"fit, axis {'xy'[k]}")
+        ax.plot(ts, axis_true[:, k], ":", color="k", lw=0.8)
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel("symmetry axis (space components)")
+    ax.set_title("tracked axis: data (dots), fit (lines), truth (dotted)", fontsize=9)
+    ax.legend(fontsize=7, ncol=2)
+    rep.figure("fit_spin", fig, caption="estimates ± σ; the tracked symmetry axis", dpi=80)
 
 
 def main(
@@ -77,7 +107,7 @@ def main(
         the numbers written to ``numbers.json``.
     """
     if quick:
-        duration, samples = min(duration, 1.0), min(samples, 31)
+        duration, samples = min(duration, 0.6), min(samples, 25)
     w_true = np.asarray(omega0, dtype=float)
     truth_build = _make_build(lever)
     ts = jnp.linspace(0.0, duration, samples)
@@ -120,6 +150,7 @@ def main(
         ["parameter", "truth", "estimate", "σ", "(estimate − truth)/σ"],
     )
     within = bool(np.all(np.abs(est - true) < 3 * sig))
+    _figure(rep, problem, res.params, np.asarray(ts), data, axis_true, names, true, est, sig)
     numbers = {
         "names": names,
         "truth": true,

@@ -9,7 +9,9 @@ a top, to observed motion, with error bars:
 2. wrap the builder in a forward model, :class:`Simulated` (``jrigid.simulate``) or
    :class:`Exact` (closed-form torque-free);
 3. pair it with observations (:class:`Gyroscope`, :class:`Orientations`,
-   :class:`AxisDirections`) in a :class:`Problem`;
+   :class:`AxisDirections`, or derived features of :mod:`jrigid.fit.features`:
+   :class:`WobbleRatio`, :class:`PrecessionRate`, :class:`SpinRate`, :class:`Tilt`,
+   :class:`NutationRate`, :class:`FlipPeriod`) in a :class:`Problem`;
 4. :func:`fit` (optax L-BFGS or Adam) and :func:`laplace` (Gauss–Newton covariance),
    :func:`propagate` for derived quantities.
 
@@ -26,6 +28,22 @@ Example::
 """
 
 from jrigid.fit.driver import FitResult, fit
+from jrigid.fit.features import (
+    FlipPeriod,
+    FreeRates,
+    NutationRate,
+    PrecessionRate,
+    SpinRate,
+    Tilt,
+    WobbleRatio,
+    angle_rate,
+    axis_angles,
+    free_rates,
+    omega_phase_rate,
+    rates_from_constants,
+    trajectory_rates,
+    unwrap,
+)
 from jrigid.fit.observations import (
     AxisDirections,
     Gyroscope,
@@ -45,21 +63,32 @@ from jrigid.fit.params import (
     positive_raw,
     unit_quaternion,
 )
-from jrigid.fit.problem import Exact, Problem, Simulated
+from jrigid.fit.problem import Exact, Invariants, Problem, Simulated
 from jrigid.fit.uncertainty import Laplace, laplace, propagate
 
 __all__ = [
     "AxisDirections",
     "Exact",
     "FitResult",
+    "FlipPeriod",
+    "FreeRates",
     "Gyroscope",
+    "Invariants",
     "Laplace",
+    "NutationRate",
     "Orientations",
+    "PrecessionRate",
     "Prediction",
     "Problem",
     "Simulated",
+    "SpinRate",
+    "Tilt",
+    "WobbleRatio",
+    "angle_rate",
+    "axis_angles",
     "axis_loss",
     "fit",
+    "free_rates",
     "gyroscope_loss",
     "inertia_tensor",
     "laplace",
@@ -67,9 +96,13 @@ __all__ = [
     "moment_ratios_raw",
     "moments",
     "moments_raw",
+    "omega_phase_rate",
     "orientation_loss",
     "positive",
     "positive_raw",
     "propagate",
+    "rates_from_constants",
+    "trajectory_rates",
     "unit_quaternion",
+    "unwrap",
 ]

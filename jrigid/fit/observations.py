@@ -22,7 +22,7 @@ non-positive ``sigma``, a zero quaternion or direction). Construct observations 
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import equinox as eqx
 import jax
@@ -52,11 +52,18 @@ class Prediction(NamedTuple):
         q: ``(T, 4)`` unit orientation of the principal frame (body → space), or ``None``.
         omega: ``(T, 3)`` body angular velocity in the principal frame.
         frame: ``(4,)`` principal → reference-frame rotation (``RigidBody.frame``).
+        moments: ``(3,)`` principal moments when the motion is torque-free (the
+            closed-form features of :mod:`jrigid.fit.features` use them), else ``None``.
+        constants: the :class:`jrigid.exact.ExactConstants` of that torque-free motion
+            when already computed (by :class:`~jrigid.fit.Exact`, or once per evaluation
+            by :class:`~jrigid.fit.Problem` for closed-form features), else ``None``.
     """
 
     q: jax.Array | None
     omega: jax.Array
     frame: jax.Array
+    moments: jax.Array | None = None
+    constants: Any = None
 
 
 # --------------------------------------------------------------------------- plain losses

@@ -54,8 +54,6 @@ __all__ = [
 DEFAULT_FLOOR = 1e-6
 
 
-
-
 def _check_last(x: jax.Array, n: int, name: str) -> None:
     if x.ndim < 1 or x.shape[-1] != n:
         raise ValueError(f"{name} must have shape (..., {n}), got {x.shape}")

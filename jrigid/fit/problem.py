@@ -7,7 +7,9 @@ user function ``build(theta) -> (Scene, State)`` that uses the maps of
 
 - :class:`Simulated` — :func:`jrigid.simulate` (any scene: tops, torques);
 - :class:`Exact` — the closed-form torque-free solution :func:`jrigid.exact.solve`
-  (``FreeRotation`` scenes without loads only; much faster, no step control).
+  (``FreeRotation`` scenes without loads only; much faster, no step control);
+- :class:`Invariants` — no trajectory, only the constants of torque-free motion, for
+  problems whose observations are all closed-form features.
 
 :class:`Problem` evaluates the model once on the sorted union of the observation times
 and the initial time ``t0``, and stacks the whitened residuals of every observation.
@@ -33,7 +35,7 @@ from jrigid.integrate import simulate
 from jrigid.scene import FreeRotation, Scene
 from jrigid.state import State
 
-__all__ = ["Exact", "Problem", "Simulated"]
+__all__ = ["Exact", "Invariants", "Problem", "Simulated"]
 
 
 def _built(build, theta) -> tuple[Scene, State]:
@@ -82,7 +84,9 @@ class Simulated(eqx.Module):
         if forward_mode:
             kw["adjoint"] = diffrax.ForwardMode()
         traj = simulate(scene, state, ts, **kw)
-        return Prediction(traj.q, traj.omega, scene.body.frame)
+        free = isinstance(scene.holder, FreeRotation) and not scene.loads
+        moments = scene.body.moments if free else None
+        return Prediction(traj.q, traj.omega, scene.body.frame, moments)
 
 
 class Exact(eqx.Module):
@@ -105,8 +109,39 @@ class Exact(eqx.Module):
                 "the Exact model is for torque-free FreeRotation scenes without loads; "
                 "use Simulated"
             )
-        q, omega = exact.solve(scene.body.moments, state.q, state.omega, ts - ts[0])
-        return Prediction(q, omega, scene.body.frame)
+        consts = exact.prepare(scene.body.moments, state.q, state.omega)
+        q, omega = exact.evaluate(consts, ts - ts[0])
+        return Prediction(q, omega, scene.body.frame, scene.body.moments, consts)
+
+
+class Invariants(eqx.Module):
+    """Forward model for closed-form features only (:mod:`jrigid.fit.features`).
+
+    Predicts no trajectory: only the moments, the initial spin and the constants of the
+    torque-free motion (:func:`jrigid.exact.prepare`), which is all that
+    :class:`~jrigid.fit.WobbleRatio` and the other features with ``method="closed"``
+    need — a much smaller program to compile and differentiate than :class:`Exact`.
+    :class:`Problem` refuses it with any other observation.
+
+    Args:
+        build: ``theta -> (Scene, State)``, a torque-free :class:`~jrigid.scene.FreeRotation`
+            scene without loads.
+    """
+
+    build: Callable[[Any], tuple[Scene, State]] = eqx.field(static=True)
+
+    def __init__(self, build: Callable[[Any], tuple[Scene, State]]):
+        self.build = build
+
+    def __call__(self, theta, ts, *, forward_mode: bool = False) -> Prediction:
+        scene, state = _built(self.build, theta)
+        if not isinstance(scene.holder, FreeRotation) or scene.loads:
+            raise ValueError(
+                "the Invariants model is for torque-free FreeRotation scenes without loads"
+            )
+        consts = exact.prepare(scene.body.moments, state.q, state.omega)
+        omega = jnp.broadcast_to(state.omega, ts.shape + (3,))
+        return Prediction(None, omega, scene.body.frame, scene.body.moments, consts)
 
 
 class Problem(eqx.Module):
@@ -139,8 +174,16 @@ class Problem(eqx.Module):
         for obs in observations:
             if not isinstance(obs, _Observation):
                 raise ValueError(
-                    f"observations must be Gyroscope, Orientations or AxisDirections, got {obs!r}"
+                    "observations must be Gyroscope, Orientations, AxisDirections or a "
+                    f"feature of jrigid.fit.features, got {obs!r}"
                 )
+        if isinstance(model, Invariants) and not all(
+            getattr(o, "method", None) == "closed" for o in observations
+        ):
+            raise ValueError(
+                "fit.Invariants predicts no trajectory: use it only with closed-form "
+                "features (method='closed'); use fit.Exact or fit.Simulated otherwise"
+            )
         all_ts = np.concatenate([np.asarray(o.ts) for o in observations])
         t0 = float(all_ts.min()) if t0 is None else float(t0)
         if not np.isfinite(t0):
@@ -171,9 +214,14 @@ class Problem(eqx.Module):
     def residuals(self, theta, *, forward_mode: bool = False) -> jax.Array:
         """``(N,)`` whitened residuals of all observations, concatenated."""
         pred = self.predict(theta, forward_mode=forward_mode)
+        closed = any(getattr(o, "method", None) == "closed" for o in self.observations)
+        if closed and pred.constants is None and pred.moments is not None:
+            # once for all closed-form features (they only need the invariants at t0)
+            identity = jnp.zeros(4, pred.omega.dtype).at[0].set(1.0)
+            pred = pred._replace(constants=exact.prepare(pred.moments, identity, pred.omega[0]))
         parts = []
         for obs, idx in zip(self.observations, self.index, strict=True):
-            sub = Prediction(None if pred.q is None else pred.q[idx], pred.omega[idx], pred.frame)
+            sub = pred._replace(q=None if pred.q is None else pred.q[idx], omega=pred.omega[idx])
             parts.append(obs.residuals(sub))
         return jnp.concatenate(parts)
 
