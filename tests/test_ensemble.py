@@ -137,6 +137,24 @@ def test_padding_and_trim():
     assert_identical(out, straight(rotor, inputs))
 
 
+def test_order_groups_members_and_restores_input_order(tmp_path):
+    """With ``order`` the chunks hold the permuted members; results come back in input order."""
+    inputs = rotor_inputs(10)
+    order = np.argsort(inputs["steps"])  # group members of similar cost
+    counted, calls = counting(rotor)
+    out = ensemble.run(counted, inputs, chunk_size=4, progress=False, order=order,
+                       out_dir=tmp_path)
+    assert calls[:4] == order[:4].tolist()  # the first chunk holds the cheapest members
+    assert_identical(out, straight(rotor, inputs))
+    stored = np.load(tmp_path / "chunk_00000.npz")["tag"]
+    assert stored.tolist() == order[:4].tolist()
+    with pytest.raises(ValueError, match="differ|match|another"):  # order is fingerprinted
+        ensemble.run(rotor, inputs, chunk_size=4, progress=False, out_dir=tmp_path)
+    for bad in (order[:-1], np.zeros(10, dtype=int), order.astype(float)):
+        with pytest.raises(ValueError, match="permutation"):
+            ensemble.run(rotor, inputs, chunk_size=4, progress=False, order=bad)
+
+
 def test_one_member_and_chunk_larger_than_n():
     inputs = rotor_inputs(1)
     out = ensemble.run(rotor, inputs, chunk_size=1000, progress=False)

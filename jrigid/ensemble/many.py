@@ -46,6 +46,7 @@ def simulate_many(
     progress: bool | None = None,
     devices: Sequence[jax.Device] | None = None,
     info: dict[str, Any] | None = None,
+    order: Any = None,
     **simulate_kwargs,
 ) -> dict[str, np.ndarray]:
     """Simulate ``N`` initial states (and/or parameters) with :func:`ensemble.run <run>`.
@@ -62,7 +63,7 @@ def simulate_many(
         summary: ``summary(trajectory) -> dict[str, array]``, what to keep per member;
             default :func:`default_summary` (``q``, ``omega`` at ``ts``, ``result``,
             ``num_steps``). Reduce here (e.g. final state only) to save memory and disk.
-        chunk_size, out_dir, metadata, resume, progress, devices, info: as in
+        chunk_size, out_dir, metadata, resume, progress, devices, info, order: as in
             :func:`run`. ``ts``, the scene (when fixed), ``rtol``, ``atol`` and ``dt0``
             are passed as ``run``'s traced ``shared`` values (other values do not
             recompile; they are fingerprinted in ``meta.json``); the other
@@ -124,6 +125,7 @@ def simulate_many(
         progress=progress,
         devices=devices,
         info=info,
+        order=order,
     )
 
 

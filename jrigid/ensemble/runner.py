@@ -204,6 +204,7 @@ def run(
     shared: Any = None,
     check_finite: bool = True,
     info: dict[str, Any] | None = None,
+    order: Any = None,
 ) -> dict[str, np.ndarray]:
     """Evaluate ``fn`` on every member of ``inputs``: chunked, sharded, saved, resumable.
 
@@ -245,6 +246,12 @@ def run(
         info: optional dict, filled with run statistics: ``compile_seconds``,
             ``run_seconds``, ``chunks_computed``, ``chunks_loaded``, ``n_devices``,
             ``batch`` (members per compiled call), ``chunk_size``, ``n_chunks``.
+        order: optional ``(N,)`` permutation: members are computed (and chunked, and
+            stored) in the order ``inputs[order]``, and the results are put back in input
+            order. Under ``vmap`` an adaptive solve runs until the slowest member of its
+            chunk is done, so grouping members of similar cost raises the useful work
+            (e.g. ``order=jrigid.stability.difficulty_order(proxy)``). It is part of the
+            fingerprint a resumed run must match.
 
     Returns:
         ``dict[str, np.ndarray]``: each output of ``fn`` stacked over members, leading
@@ -261,6 +268,11 @@ def run(
         raise ValueError(f"fn must be callable, got {type(fn).__name__}")
     named, treedef = _named_leaves(inputs)
     n = _check_inputs(named, check_finite)
+    inverse = None
+    if order is not None:
+        order = _permutation(order, n)
+        named = [(k, a[order]) for k, a in named]
+        inverse = np.argsort(order)
     s_named, s_treedef = _named_leaves(shared, "shared")
     if check_finite:
         _check_finite(s_named, "shared")
@@ -387,4 +399,17 @@ def run(
             chunk_size=size,
             n_chunks=n_chunks,
         )
-    return {k: np.concatenate([r[k] for r in results], axis=0) for k in spec}
+    out = {k: np.concatenate([r[k] for r in results], axis=0) for k in spec}
+    return out if inverse is None else {k: v[inverse] for k, v in out.items()}
+
+
+def _permutation(order, n: int) -> np.ndarray:
+    """``order`` as an ``(n,)`` int array holding each of ``0 … n−1`` once (else ``ValueError``)."""
+    a = np.asarray(order)
+    if a.shape != (n,) or a.dtype.kind not in "iu" or not np.array_equal(np.sort(a), np.arange(n)):
+        raise ValueError(
+            f"order must be a permutation of the {n} members (an int array of shape ({n},) "
+            f"holding 0 … {n - 1} once each), got shape {a.shape} and dtype {a.dtype}"
+        )
+    return a
+
