@@ -16,7 +16,8 @@ putting ``benchmarks/`` on ``sys.path``). It holds no physics, only:
 - :func:`pareto_front`, :func:`time_to_error` — log-log interpolation of a work-precision
   curve at a target error;
 - :func:`markdown_table`, :func:`write_json`, :func:`write_text`,
-  :func:`work_precision_figure` — the JSON, markdown and PNG outputs (matplotlib through
+  :func:`work_precision_figure`, :func:`work_precision_grid` — the JSON, markdown and
+  PNG outputs (matplotlib through
   its object-oriented API: ``Figure`` and the Agg canvas, no pyplot state).
 
 Results go to ``benchmarks/results/`` (git-ignored); see :func:`results_dir`.
@@ -58,6 +59,7 @@ __all__ = [
     "time_runs",
     "time_to_error",
     "work_precision_figure",
+    "work_precision_grid",
     "write_json",
     "write_text",
 ]
@@ -598,4 +600,84 @@ def work_precision_figure(
     path = pathlib.Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
+    return path
+
+
+def work_precision_grid(
+    panels: dict[str, dict[str, tuple[Sequence[float], Sequence[float]]]],
+    path: str | os.PathLike,
+    *,
+    ncols: int = 2,
+    targets: Sequence[float] = (),
+    highlight: Sequence[str] = (),
+    title: str = "",
+) -> pathlib.Path:
+    """Work-precision diagrams of several problems on a grid, one legend for all.
+
+    Like :func:`work_precision_figure` (error on x, inverted; time on y; log-log), with
+    ``ncols`` panels a row. Methods not starting with ``"jrigid"`` (the peers) are drawn
+    dashed with square markers; a method with a single run is drawn as a star.
+
+    Args:
+        panels: ``{panel title: {method label: (errors, times)}}``.
+        path: PNG file to write.
+        ncols: panels per row.
+        targets: error levels drawn as dotted vertical lines.
+        highlight: labels drawn thick.
+        title: figure title (e.g. the machine line).
+
+    Returns:
+        the PNG path.
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    n = max(len(panels), 1)
+    ncols = max(1, min(ncols, n))
+    nrows = math.ceil(n / ncols)
+    fig = Figure(figsize=(6.0 * ncols + 3.2, 4.6 * nrows), layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
+    labels = list(dict.fromkeys(label for curves in panels.values() for label in curves))
+    palette = [f"C{i}" for i in range(10)] + [
+        "olive", "navy", "brown", "teal", "magenta", "black", "gold", "lime", "crimson",
+        "slategray", "orchid", "peru", "darkgreen", "steelblue", "salmon",
+    ]
+    colour = {label: palette[i % len(palette)] for i, label in enumerate(labels)}
+    handles: dict[str, Any] = {}
+    for ax, (name, curves) in zip(axes, panels.items(), strict=False):
+        for label, (errs, times) in curves.items():
+            pts = sorted(
+                (e, t) for e, t in zip(errs, times, strict=True)
+                if e is not None and math.isfinite(e) and e > 0
+            )
+            if not pts:
+                continue
+            xs, ys = zip(*pts, strict=True)
+            peer = not label.startswith("jrigid")
+            (line,) = ax.loglog(
+                xs, ys,
+                marker="*" if len(pts) == 1 else ("s" if peer else "o"),
+                markersize=11 if len(pts) == 1 else 3.5,
+                linestyle="--" if peer else "-",
+                linewidth=2.8 if label in highlight else 1.1,
+                color=colour[label],
+                label=label,
+            )
+            handles.setdefault(label, line)
+        for target in targets:
+            ax.axvline(target, color="0.7", linestyle=":", linewidth=0.8)
+        ax.set_title("\n".join(textwrap.wrap(name, 55)), fontsize=9)
+        ax.set_xlabel("final error (worst of relative ω and q)", fontsize=8)
+        ax.set_ylabel("wall time after compilation [s]", fontsize=8)
+        ax.invert_xaxis()
+        ax.grid(True, which="major", alpha=0.3)
+    for ax in axes[n:]:
+        ax.set_visible(False)
+    fig.legend(list(handles.values()), list(handles), loc="outside right center", fontsize=7)
+    if title:
+        fig.suptitle(title, fontsize=8)
+    path = pathlib.Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
     return path
