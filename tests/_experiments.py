@@ -2,6 +2,8 @@
 
 import json
 
+import pytest
+
 from jrigid import cli, registry
 
 
@@ -22,3 +24,22 @@ def assert_listed_and_written(name, results) -> None:
     _, folder = results[name]
     assert (folder / "report.md").is_file() and (folder / "run.json").is_file()
     assert list(folder.glob("*.png")), "no figure written"
+
+
+def quick_suite(names):
+    """``(results, test_listed_and_writes_outputs)`` for a test module of experiments.
+
+    ``results`` is a module-scoped fixture running each experiment's quick mode once
+    (:func:`run_quick`); the test checks each is listed and wrote its outputs. Use as
+    ``results, test_listed_and_writes_outputs = quick_suite(NAMES)``.
+    """
+
+    @pytest.fixture(scope="module")
+    def results(tmp_path_factory):
+        return run_quick(tmp_path_factory, names)
+
+    @pytest.mark.parametrize("name", names)
+    def test_listed_and_writes_outputs(name, results):
+        assert_listed_and_written(name, results)
+
+    return results, test_listed_and_writes_outputs

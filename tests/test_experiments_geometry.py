@@ -13,7 +13,7 @@ import math
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _experiments import assert_listed_and_written, run_quick
+from _experiments import quick_suite
 from scipy.spatial.transform import Rotation
 
 from jrigid import registry
@@ -22,15 +22,7 @@ NAMES = ("affine_2d", "affine_3d", "methane", "euler_angles", "quaternion_rotati
 EXACT = 1e-12  # see the module docstring
 
 
-@pytest.fixture(scope="module")
-def results(tmp_path_factory):
-    """name -> (numbers, out_dir), each experiment run once in quick mode."""
-    return run_quick(tmp_path_factory, NAMES)
-
-
-@pytest.mark.parametrize("name", NAMES)
-def test_listed_and_writes_outputs(name, results):
-    assert_listed_and_written(name, results)
+results, test_listed_and_writes_outputs = quick_suite(NAMES)
 
 
 # --------------------------------------------------------------------------- 1. affine_2d

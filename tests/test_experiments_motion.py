@@ -8,20 +8,12 @@ the conservation laws an impulse must obey. Tolerances are justified where used.
 
 import numpy as np
 import pytest
-from _experiments import assert_listed_and_written, run_quick
+from _experiments import quick_suite
 
 NAMES = ("rotating_frame", "falling_box")
 
 
-@pytest.fixture(scope="module")
-def results(tmp_path_factory):
-    """name -> (numbers, out_dir), each experiment run once in quick mode."""
-    return run_quick(tmp_path_factory, NAMES)
-
-
-@pytest.mark.parametrize("name", NAMES)
-def test_listed_and_writes_outputs(name, results):
-    assert_listed_and_written(name, results)
+results, test_listed_and_writes_outputs = quick_suite(NAMES)
 
 
 # --------------------------------------------------------------------------- 17.1

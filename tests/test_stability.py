@@ -15,7 +15,7 @@ import jax.numpy as jnp
 import mpmath
 import numpy as np
 import pytest
-from _experiments import assert_listed_and_written, run_quick
+from _experiments import quick_suite
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
@@ -246,14 +246,7 @@ def test_lockstep_efficiency_by_hand():
 NAMES = ("stability_map", "stability_bodies")
 
 
-@pytest.fixture(scope="module")
-def results(tmp_path_factory):
-    return run_quick(tmp_path_factory, NAMES)
-
-
-@pytest.mark.parametrize("name", NAMES)
-def test_listed_and_writes_outputs(name, results):
-    assert_listed_and_written(name, results)
+results, test_listed_and_writes_outputs = quick_suite(NAMES)
 
 
 def test_stability_map_quick_shows_the_unstable_middle_axis(results):
