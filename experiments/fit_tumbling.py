@@ -56,15 +56,7 @@ def _figures(rep, record, params, names, true, est, sig, sweep) -> None:
     problem, ts, data = record
     fig = viz.new_figure(figsize=(11, 3.4))
     ax = fig.add_subplot(1, 2, 1)
-    z = (est - true) / sig
-    ax.axhspan(-3, 3, color="0.9", label="±3σ")
-    ax.errorbar(np.arange(len(names)), z, yerr=np.ones_like(z), fmt="o", capsize=3,
-                label="(estimate − truth)/σ ± 1")  # fmt: skip
-    ax.axhline(0.0, color="k", lw=0.8)
-    ax.set_xticks(np.arange(len(names)), names)
-    ax.set_ylabel("(estimate − truth) / σ")
-    ax.set_title("estimates ± σ against the truth", fontsize=9)
-    ax.legend(fontsize=7)
+    viz.plot_estimates(names, est, true, sig, ax=ax)
     ax = fig.add_subplot(1, 2, 2)
     pred = problem.predict(params)
     for k in range(3):

@@ -337,6 +337,13 @@ def test_plot_writes_an_image(name, tmp_path):
     _assert_image(path)
 
 
+def test_plot_estimates_shows_standardised_errors(tmp_path):
+    fig = viz.plot_estimates(["a", "b"], [1.1, 2.0], [1.0, 2.2], [0.05, 0.1])
+    points = fig.axes[0].containers[0].lines[0].get_ydata()  # the error-bar markers
+    np.testing.assert_allclose(points, [2.0, -2.0])
+    _assert_image(viz.save(fig, tmp_path / "estimates.png"))
+
+
 @pytest.mark.parametrize("name", list(MESHES))
 def test_body_still_writes_an_image(name, tmp_path):
     q = Rotation.from_euler("zxz", [0.3, 0.4, 0.5]).as_quat(scalar_first=True)

@@ -37,6 +37,7 @@ from .animation import (
 )
 from .data import Series, as_series, resample
 from .plots import (
+    plot_estimates,
     plot_euler_angles,
     plot_invariants,
     plot_omega,
@@ -69,6 +70,7 @@ __all__ = [
     "fit_rate",
     "frame_times",
     "new_figure",
+    "plot_estimates",
     "plot_euler_angles",
     "plot_invariants",
     "plot_omega",

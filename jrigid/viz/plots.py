@@ -31,6 +31,7 @@ from .angles import euler_about, fit_rate
 from .data import Series, as_series
 
 __all__ = [
+    "plot_estimates",
     "plot_euler_angles",
     "plot_invariants",
     "plot_omega",
@@ -241,4 +242,30 @@ def plot_overview(data: Any, *, moments=None, axis: int = 2, seq: str = "ZXZ") -
     attempt(ax[0, 2], lambda: plot_q_norm(s, ax=ax[0, 2]))
     attempt(ax[1, 0], lambda: plot_euler_angles(s, seq=seq, ax=ax[1, 0]))
     attempt(ax[1, 1], lambda: plot_precession_nutation(s, axis=axis, axes=(ax[1, 1], ax[1, 2])))
+    return fig
+
+
+def plot_estimates(names, estimate, truth, sigma, *, ax=None) -> Figure:
+    """Fitted parameters against the truth, in units of their standard deviation.
+
+    Args:
+        names: ``K`` parameter labels.
+        estimate, truth, sigma: ``(K,)`` estimates, true values and standard deviations
+            (e.g. from :func:`jrigid.fit.laplace`).
+        ax: draw into these axes (default: a new figure).
+
+    Returns:
+        The figure: ``(estimate − truth)/σ ± 1`` per parameter over a ±3σ band.
+    """
+    fig, ax = _axes(ax)
+    z = (np.asarray(estimate) - np.asarray(truth)) / np.asarray(sigma)
+    ticks = np.arange(len(names))
+    ax.axhspan(-3, 3, color="0.9", label="±3σ")
+    ax.errorbar(ticks, z, yerr=np.ones_like(z), fmt="o", capsize=3,
+                label="(estimate − truth)/σ ± 1")  # fmt: skip
+    ax.axhline(0.0, color="k", lw=0.8)
+    ax.set_xticks(ticks, list(names))
+    ax.set_ylabel("(estimate − truth) / σ")
+    ax.set_title("estimates ± σ against the truth", fontsize=9)
+    ax.legend(fontsize=7)
     return fig
