@@ -310,8 +310,10 @@ def test_hairer_norsett_wanner_solution_and_invariants():
 
 
 def test_mujoco_conventions_match_jrigid():
-    """Free joint: qpos quaternion body → world scalar first, qvel ω in the body frame."""
-    pytest.importorskip("mujoco")
+    """Free joint: qpos quaternion body → world scalar first, qvel ω in the body frame.
+
+    MuJoCo is a test dependency (the ``test`` extra), so this always runs in CI.
+    """
     case = hc.CASES["thin_rod"]
     run = wp.mujoco_runner(case, "small", "RK4")
     ref = hc.reference(case, "small")
@@ -330,8 +332,7 @@ def test_work_precision_machinery_on_a_tiny_case(tmp_path):
     """The report's sweep, summary, markdown and figure on one small case (no compiling)."""
     case = hc.CASES["hairer_rigid_body"]
     cache = wp.Compiled(lambda *a: None)
-    peers = ("scipy DOP853", "MuJoCo RK4") if wp.mujoco_runner(case, "small", "RK4") else (
-        "scipy DOP853",)
+    peers = ("scipy DOP853", "MuJoCo RK4")
     res = wp.run_case(case, "small", quick=True, cache=cache, log=lambda *a: None,
                       only=lambda label: label in peers)
     methods = res["methods"]
