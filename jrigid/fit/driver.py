@@ -1,4 +1,11 @@
-"""The :func:`fit` driver: optax's L-BFGS (with its zoom line search) or Adam.
+"""The :func:`fit` driver: optax's L-BFGS (with its zoom line search), Adam, or
+Levenberg–Marquardt on a :class:`~jrigid.fit.problem.Problem`'s residuals.
+
+Levenberg–Marquardt (``method="lm"``) takes the residuals' Jacobian by forward mode
+(``jax.jacfwd`` with diffrax's ``ForwardMode``): one tangent per parameter, the right
+choice when the parameters are few (see the README's adjoint measurement), and the
+Gauss–Newton model it steps on is the one :func:`jrigid.fit.laplace` uses for the error
+bars. The first-order methods take reverse-mode gradients.
 
 One compiled step function per call; the loop runs in Python so that it can stop,
 record a history and drive a ``tqdm`` progress bar. Stopping rules, checked before
@@ -24,8 +31,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optax
+from jax.flatten_util import ravel_pytree
 
 from jrigid.fit.problem import Problem
+from jrigid.fit.uncertainty import _residuals_and_jacobian
 
 __all__ = ["FitResult", "fit"]
 
@@ -83,6 +92,40 @@ def _lbfgs_step(f, optimizer, p, s):
 
 
 @eqx.filter_jit
+def _gauss_newton(problem, p):
+    """``(½ Σ r², gradient Jᵀr, Gauss–Newton matrix JᵀJ)`` at ``p`` (flat), forward mode."""
+    r, jac = _residuals_and_jacobian(problem, p)
+    return 0.5 * jnp.sum(r * r), jac.T @ r, jac.T @ jac
+
+
+@eqx.filter_jit
+def _lm_trial(p, grad, gn, lam):
+    """``p + δ`` with ``(JᵀJ + λ diag(JᵀJ)) δ = −Jᵀr`` (Marquardt's scaling)."""
+    flat, unravel = ravel_pytree(p)
+    d = jnp.diag(gn)
+    damped = gn + jnp.diag(lam * jnp.where(d > 0, d, 1.0))
+    return unravel(flat + jnp.linalg.solve(damped, -grad))
+
+
+def _lm_step(problem, _optimizer, p, s):
+    """One accepted Levenberg–Marquardt step (λ raised until the loss decreases).
+
+    ``s = (λ, (value, grad, JᵀJ) at p or None)``. Returns ``p`` unchanged when no damping
+    up to ``1e16`` decreases the loss (a minimum to rounding: the ``ftol`` rule stops).
+    """
+    lam, cache = s
+    value, grad, gn = _gauss_newton(problem, p) if cache is None else cache
+    _, unravel = ravel_pytree(p)
+    while lam < 1e16:
+        trial = _lm_trial(p, grad, gn, lam)
+        new = _gauss_newton(problem, trial)
+        if bool(new[0] < value):
+            return trial, (max(lam / 3.0, 1e-12), new), value, unravel(grad)
+        lam *= 4.0
+    return p, (lam, (value, grad, gn)), value, unravel(grad)
+
+
+@eqx.filter_jit
 def _plain_step(f, optimizer, p, s):
     value, grad = jax.value_and_grad(f)(p)
     updates, s = optimizer.update(grad, s, p)
@@ -109,9 +152,11 @@ def fit(
             any differentiable ``params -> ()`` function.
         params0: starting pytree of float arrays (raw, unconstrained parameters; see
             :mod:`jrigid.fit.params`).
-        method: ``"lbfgs"`` (``optax.lbfgs`` with zoom line search; default) or ``"adam"``.
+        method: ``"lbfgs"`` (``optax.lbfgs`` with zoom line search; default), ``"adam"``,
+            or ``"lm"`` (Levenberg–Marquardt with forward-mode Jacobians; ``objective``
+            must be a :class:`~jrigid.fit.problem.Problem`).
         learning_rate: Adam's step (default ``1e-2``); for L-BFGS ``None`` lets the line
-            search choose.
+            search choose; for ``"lm"`` the initial damping λ (default ``1e-3``).
         max_iter: largest number of optimiser steps.
         gtol: stop when ``‖∇f‖_∞ ≤ gtol``.
         ftol: stop when the relative decrease falls below ``ftol`` (see module docstring).
@@ -125,29 +170,34 @@ def fit(
         :class:`FitResult`.
 
     Raises:
-        ValueError: unknown method, non-positive ``max_iter``, or a non-finite loss at
-            ``params0``.
+        ValueError: unknown method, non-positive ``max_iter``, a non-finite loss at
+            ``params0``, or ``"lm"`` with an objective that is not a ``Problem``.
     """
     f = _as_loss(objective)
     if not isinstance(max_iter, int) or max_iter < 1:
         raise ValueError(f"max_iter must be a positive int, got {max_iter!r}")
     params = jax.tree_util.tree_map(lambda x: jnp.asarray(x, dtype=jnp.result_type(float)), params0)
+    if optimizer is None and method not in ("lbfgs", "adam", "lm"):
+        raise ValueError(f"method must be 'lbfgs', 'adam' or 'lm', got {method!r}")
+    marquardt = optimizer is None and method == "lm"
     linesearch = optimizer is None and method == "lbfgs"
-    if optimizer is None:
-        if method not in ("lbfgs", "adam"):
-            raise ValueError(f"method must be 'lbfgs' or 'adam', got {method!r}")
-        optimizer = _optimizer(method, learning_rate)
-    # strip weak types, else the second step recompiles
-    state = jax.tree_util.tree_map(
-        lambda x: jnp.asarray(x, dtype=jnp.asarray(x).dtype), optimizer.init(params)
-    )
+    if marquardt:
+        if not isinstance(objective, Problem):
+            raise ValueError("method='lm' needs a Problem (it fits the residuals)")
+        f, state = objective, (1e-3 if learning_rate is None else float(learning_rate), None)
+    else:
+        optimizer = _optimizer(method, learning_rate) if optimizer is None else optimizer
+        # strip weak types, else the second step recompiles
+        state = jax.tree_util.tree_map(
+            lambda x: jnp.asarray(x, dtype=jnp.asarray(x).dtype), optimizer.init(params)
+        )
 
     # One compiled function per fit: it returns the value and gradient at ``p`` and the
     # next iterate; the loop checks the stopping rules on the former before accepting
     # the latter.
     # ``f`` is an argument (a pytree when it is a Problem's bound method), so problems
     # that differ only in their data reuse the compiled step.
-    step = _lbfgs_step if linesearch else _plain_step
+    step = _lm_step if marquardt else _lbfgs_step if linesearch else _plain_step
 
     show = (max_iter >= 100 and sys.stderr.isatty()) if progress is None else bool(progress)
     bar = None
@@ -159,7 +209,7 @@ def fit(
     history: dict[str, list] = {"loss": [], "grad_norm": []}
     if record_params:
         history["params"] = []
-    patience = 1 if linesearch else 5
+    patience = 1 if linesearch or marquardt else 5
     small = 0
     reason = "max_iter"
     n_iter = 0
