@@ -62,7 +62,7 @@ from jrigid import quaternion as quat
 from jrigid._checks import as_float, is_traced
 from jrigid.formulations import get_formulation
 from jrigid.integrate import ProjectedSolver, prepare, validate
-from jrigid.scene import AbstractLoad, Scene
+from jrigid.scene import AbstractLoad, Scene, _solve3
 from jrigid.state import State
 from jrigid.trajectory import Trajectory
 
@@ -140,14 +140,6 @@ def point_velocities(q: ArrayLike, omega: ArrayLike, v: ArrayLike, points: Array
 def _skew(r: jax.Array) -> jax.Array:
     z = jnp.zeros((), r.dtype)
     return jnp.array([[z, -r[2], r[1]], [r[2], z, -r[0]], [-r[1], r[0], z]])
-
-
-def _solve3(a: jax.Array, b: jax.Array) -> jax.Array:
-    """``a⁻¹ b`` for one ``(3, 3)`` matrix by the adjugate (cheap to compile)."""
-    c0 = jnp.cross(a[:, 1], a[:, 2])
-    c1 = jnp.cross(a[:, 2], a[:, 0])
-    c2 = jnp.cross(a[:, 0], a[:, 1])
-    return jnp.stack([jnp.dot(c0, b), jnp.dot(c1, b), jnp.dot(c2, b)]) / jnp.dot(a[:, 0], c0)
 
 
 def _inverse_inertia_space(moments: jax.Array, q: jax.Array) -> jax.Array:
