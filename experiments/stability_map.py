@@ -109,9 +109,10 @@ def main(
     proxy = jnp.sum((moments[None, :] * omega0) ** 2, axis=-1)  # |L|², see benchmarks/lockstep.py
     order = np.asarray(stability.difficulty_order(proxy)) if sort else np.arange(n_directions)
     info: dict = {}
-    raw = ensemble.run(
+    out = ensemble.run(
         member,
-        {"omega0": np.asarray(omega0)[order]},
+        {"omega0": np.asarray(omega0)},
+        order=order,
         chunk_size=chunk_size,
         out_dir=Path(out_dir) / "chunks",
         metadata=dict(
@@ -125,9 +126,6 @@ def main(
         ),
         info=info,
     )
-    out = {k: np.empty_like(v) for k, v in raw.items()}
-    for k, v in raw.items():
-        out[k][order] = v
 
     d = np.asarray(dirs)
     unstable = out["flips"] > 0
