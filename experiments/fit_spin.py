@@ -114,7 +114,7 @@ def main(
     start = {"tilt": jnp.asarray(0.3), "omega0": jnp.array([0.0, 0.0, 20.0])}
     if fit_lever:
         start["lever"] = fit.positive_raw(0.4)
-    res = fit.fit(problem, start, max_iter=300, gtol=1e-8)
+    res = fit.fit(problem, start, method="lm", max_iter=300, gtol=1e-8)
     lap = fit.laplace(problem, res.params)
 
     names = ["tilt", "ω0_1", "ω0_2", "ω0_3"]

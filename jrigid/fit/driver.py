@@ -91,9 +91,12 @@ def _lbfgs_step(f, optimizer, p, s):
     return optax.apply_updates(p, updates), s, value, grad
 
 
-@eqx.filter_jit
 def _gauss_newton(problem, p):
-    """``(½ Σ r², gradient Jᵀr, Gauss–Newton matrix JᵀJ)`` at ``p`` (flat), forward mode."""
+    """``(½ Σ r², gradient Jᵀr, Gauss–Newton matrix JᵀJ)`` at ``p`` (flat), forward mode.
+
+    The compiled residual Jacobian is the one :func:`jrigid.fit.laplace` uses, so the
+    error bars after an ``"lm"`` fit cost no second compilation.
+    """
     r, jac = _residuals_and_jacobian(problem, p)
     return 0.5 * jnp.sum(r * r), jac.T @ r, jac.T @ jac
 
