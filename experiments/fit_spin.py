@@ -134,8 +134,9 @@ def main(
         f"Symmetric top, moments {MOMENTS}, mass 1, lever {lever:g}, g = 9.81, released "
         f"tilted by {tilt:g} rad with ω0 = {w_true.tolist()}. The symmetry axis is tracked "
         f"for {duration:g} s ({samples} frames, noise σ = {sigma:g}, seed {seed}). "
-        f"L-BFGS through `jrigid.simulate` stopped by `{res.reason}` after {res.n_iter} "
-        f"steps; χ² = {lap.chi2:.1f} for {lap.dof} degrees of freedom."
+        f"Levenberg–Marquardt (forward-mode Jacobians) through `jrigid.simulate` stopped "
+        f"by `{res.reason}` after {res.n_iter} steps; χ² = {lap.chi2:.1f} for {lap.dof} "
+        "degrees of freedom."
     )
     rep.table(
         [[n, t, e, s, (e - t) / s] for n, t, e, s in zip(names, true, est, sig, strict=True)],
