@@ -318,7 +318,7 @@ def _all_finite(tree) -> jax.Array:
     return jnp.all(jnp.stack([jnp.all(jnp.isfinite(a)) for a in leaves]))
 
 
-def _classify(sol, formulation, scene, y_end, t_end, ys, span):
+def _classify(sol_result, formulation, scene, y_end, t_end, ys, span):
     """Map diffrax's result to a :class:`Result` code.
 
     A collapsed step size is blamed on non-finite values if the vector field is
@@ -332,15 +332,15 @@ def _classify(sol, formulation, scene, y_end, t_end, ys, span):
         d = frac * span
         y_probe = jax.tree_util.tree_map(lambda y, f, d=d: y + d * f, y_end, f_end)
         finite = finite & _all_finite(formulation.vector_field(t_end + d, y_probe, scene))
-    code = jnp.where(sol.result == R.max_steps_reached, Result.max_steps, Result.solver_failure)
+    code = jnp.where(sol_result == R.max_steps_reached, Result.max_steps, Result.solver_failure)
     code = jnp.where(
-        sol.result == R.dt_min_reached,
+        sol_result == R.dt_min_reached,
         jnp.where(finite, Result.step_size_collapse, Result.nonfinite),
         code,
     )
-    code = jnp.where(sol.result == R.event_occurred, Result.gimbal_lock, code)
+    code = jnp.where(sol_result == R.event_occurred, Result.gimbal_lock, code)
     ok = jnp.where(_all_finite(ys), Result.success, Result.nonfinite)
-    return jnp.where(sol.result == R.successful, ok, code).astype(jnp.int32)
+    return jnp.where(sol_result == R.successful, ok, code).astype(jnp.int32)
 
 
 @eqx.filter_jit
@@ -351,44 +351,63 @@ def _solve(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoint, max_
     y0 = formulation.from_state(scene, _normalised(state))
     if project:
         solver = ProjectedSolver(solver, formulation)
-    t0, t1 = ts[0], ts[-1]
-    eps = jnp.finfo(ts.dtype).eps
-    controller = diffrax.PIDController(
-        rtol=rtol,
-        atol=atol,
-        dtmin=4 * eps * jnp.maximum(jnp.abs(t0), jnp.abs(t1)),
-        force_dtmin=False,
-    )
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(formulation.vector_field),
         solver,
-        t0,
-        t1,
+        ts[0],
+        ts[-1],
         dt0,
         y0,
         args=scene,
         saveat=diffrax.SaveAt(ts=ts, t1=True, dense=dense),
-        stepsize_controller=controller,
+        stepsize_controller=controller(ts, rtol, atol),
         adjoint=adjoint,
         event=formulation.event(),
         max_steps=max_steps,
         throw=False,
     )
+    stats = {k: sol.stats[k] for k in ("num_steps", "num_accepted_steps", "num_rejected_steps")}
+    return finish(scene, formulation, ts, sol.ts, sol.ys, sol.result, stats, sol.interpolation)
+
+
+def controller(ts, rtol, atol, norm=None) -> diffrax.PIDController:
+    """The PID step-size controller of every jrigid solve (``norm``: diffrax's default RMS).
+
+    ``dtmin`` is ``4 eps max(|t0|, |t1|)`` without forcing: a smaller step ends the solve
+    with ``dt_min_reached`` (:attr:`Result.step_size_collapse` or ``nonfinite``).
+    """
+    eps = jnp.finfo(ts.dtype).eps
+    extra = {} if norm is None else {"norm": norm}
+    return diffrax.PIDController(
+        rtol=rtol,
+        atol=atol,
+        dtmin=4 * eps * jnp.maximum(jnp.abs(ts[0]), jnp.abs(ts[-1])),
+        force_dtmin=False,
+        **extra,
+    )
+
+
+def finish(scene, formulation, ts, saved_ts, saved_ys, sol_result, stats, interpolation=None):
+    """One member's :class:`~jrigid.trajectory.Trajectory` from a diffrax solution.
+
+    Args:
+        saved_ts: ``(T + 1,)`` ``sol.ts`` of ``SaveAt(ts=ts, t1=True)``.
+        saved_ys: ``sol.ys``, leading axis ``T + 1``.
+        sol_result: ``sol.result``; stats: the step counts.
+    """
     # diffrax writes the final state into the first unfilled slot: on failure that is
     # not the last one. Keep only slots saved at their requested time; NaN elsewhere.
-    saved_ts = sol.ts
     valid = saved_ts[:-1] == ts
     t_end = jnp.max(jnp.where(jnp.isfinite(saved_ts), saved_ts, -jnp.inf))
     i_end = jnp.argmax(saved_ts == t_end)
-    y_end = jax.tree_util.tree_map(lambda a: a[i_end], sol.ys)
+    y_end = jax.tree_util.tree_map(lambda a: a[i_end], saved_ys)
 
     def _mask(a):
         keep = valid.reshape(valid.shape + (1,) * (a.ndim - 1))
         return jnp.where(keep, a[:-1], jnp.nan)
 
-    ys = jax.tree_util.tree_map(_mask, sol.ys)
-    result = _classify(sol, formulation, scene, y_end, t_end, ys, t1 - t0)
-    stats = {k: sol.stats[k] for k in ("num_steps", "num_accepted_steps", "num_rejected_steps")}
+    ys = jax.tree_util.tree_map(_mask, saved_ys)
+    result = _classify(sol_result, formulation, scene, y_end, t_end, ys, ts[-1] - ts[0])
     return Trajectory.build(
         scene,
         formulation,
@@ -397,7 +416,7 @@ def _solve(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoint, max_
         stats=stats,
         result=result,
         t_stop=t_end,
-        interpolation=sol.interpolation,
+        interpolation=interpolation,
     )
 
 # --------------------------------------------------------------------------- exact
@@ -576,12 +595,23 @@ def _raise_on_failure(traj, throw, ts, rtol, atol, max_steps):
         return traj
     if is_traced(traj.result):
         messages = [""] + [_traced_message(Result(k), max_steps) for k in range(1, len(Result))]
-        return eqx.branched_error_if(traj, traj.result != 0, traj.result, messages)
+        codes = traj.result.reshape(-1)  # one code, or a batch's (first failure reported)
+        first = codes[jnp.argmax(codes != 0)]
+        return eqx.branched_error_if(traj, jnp.any(codes != 0), first, messages)
+    codes = jax.device_get(traj.result)
+    which = ""
+    if codes.ndim:  # a batch (jrigid.ensemble.simulate_lockstep): report its first failure
+        failed = codes.reshape(-1) != 0
+        if not failed.any():
+            return traj
+        k = int(failed.argmax())
+        which = f"member {k} of {failed.size} ({int(failed.sum())} failed) "
+        traj = jax.tree_util.tree_map(lambda a: a.reshape(-1, *a.shape[codes.ndim:])[k], traj)
     code = Result(int(traj.result))
     if code != Result.success:
         cause, remedy = _CAUSE[code]
         raise SimulationError(
-            f"jrigid.simulate failed at t={float(traj.t_stop):.6g} "
+            f"jrigid.simulate failed {which}at t={float(traj.t_stop):.6g} "
             f"(integrating {float(ts[0]):.6g} → {float(ts[-1]):.6g}, "
             f"{int(traj.stats['num_accepted_steps'])} accepted and "
             f"{int(traj.stats['num_rejected_steps'])} rejected steps, "

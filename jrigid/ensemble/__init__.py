@@ -4,7 +4,10 @@
   axis, as ``jax.jit(jax.vmap(fn))`` in chunks of ``chunk_size`` members, each chunk
   split over every device (:mod:`jrigid.ensemble.sharding`), each finished chunk written
   to ``out_dir`` (:mod:`jrigid.ensemble.storage`) so an interrupted run resumes;
-- :func:`simulate_many` — the common case, :func:`jrigid.simulate` per member;
+- :func:`simulate_many` — the common case, :func:`jrigid.simulate` per member (or one
+  shared-step solve per chunk, ``shared_step=True``);
+- :func:`simulate_lockstep` — a batch integrated as one system with a shared adaptive
+  step (the fast route on a CPU; see :mod:`jrigid.ensemble.lockstep`);
 - :func:`default_summary` — what :func:`simulate_many` keeps by default.
 
 Several processes (multi-host, ``jax.distributed``): call ``jax.distributed.initialize()``
@@ -22,7 +25,8 @@ own folder). The multi-process path follows JAX's documented APIs
 forced host devices in one process.
 """
 
+from jrigid.ensemble.lockstep import simulate_lockstep
 from jrigid.ensemble.many import default_summary, simulate_many
 from jrigid.ensemble.runner import run
 
-__all__ = ["default_summary", "run", "simulate_many"]
+__all__ = ["default_summary", "run", "simulate_lockstep", "simulate_many"]

@@ -1,4 +1,8 @@
-"""The common case of an ensemble: :func:`simulate_many`, one :func:`jrigid.simulate` per member."""
+"""The common case of an ensemble: :func:`simulate_many`, :func:`jrigid.simulate` for every member.
+
+Per member (``jax.vmap(simulate)``, the default) or, with ``shared_step=True``, one
+lockstep solve per chunk (:func:`~jrigid.ensemble.simulate_lockstep`).
+"""
 
 from __future__ import annotations
 
@@ -11,6 +15,7 @@ import jax
 import numpy as np
 from jax.typing import ArrayLike
 
+from jrigid.ensemble.lockstep import simulate_lockstep
 from jrigid.ensemble.runner import run
 from jrigid.integrate import simulate
 from jrigid.scene import Scene
@@ -47,6 +52,7 @@ def simulate_many(
     devices: Sequence[jax.Device] | None = None,
     info: dict[str, Any] | None = None,
     order: Any = None,
+    shared_step: bool = False,
     **simulate_kwargs,
 ) -> dict[str, np.ndarray]:
     """Simulate ``N`` initial states (and/or parameters) with :func:`ensemble.run <run>`.
@@ -67,9 +73,20 @@ def simulate_many(
             :func:`run`. ``ts``, the scene (when fixed), ``rtol``, ``atol`` and ``dt0``
             are passed as ``run``'s traced ``shared`` values (other values do not
             recompile; they are fingerprinted in ``meta.json``); the other
-            ``simulate_kwargs`` and the summary's name are stored in the metadata, so
-            resuming with other settings is refused. Pass the same ``summary`` function
-            object (not a new lambda) to reuse the compiled program between calls.
+            ``simulate_kwargs``, ``shared_step`` and the summary's name are stored in the
+            metadata, so resuming with other settings is refused. Pass the same
+            ``summary`` function object (not a new lambda) to reuse the compiled program
+            between calls.
+        shared_step: ``False`` (default): every member has its own adaptive step
+            (``jax.vmap(simulate)``), and its results do not depend on the chunk.
+            ``True``: each device's share of a chunk (``chunk_size / n_devices``
+            members) is integrated as one system with a shared step
+            (:func:`~jrigid.ensemble.simulate_lockstep`): several times the throughput
+            on a CPU (``benchmarks/ensemble_throughput.py``), every member within its
+            tolerance, but a member's results depend on the other members of its group
+            (a resumed run must keep the chunk size and device count, so it is still
+            identical), and a failure stops its whole group (the members' ``result``
+            codes say so). Not for ``euler_angles``.
         **simulate_kwargs: passed to :func:`jrigid.simulate` (``solver``, ``rtol``,
             ``formulation``, ...). ``throw`` defaults to ``False`` here: a failed member
             gets a nonzero ``result`` code and NaN outputs instead of stopping the run.
@@ -107,12 +124,14 @@ def simulate_many(
         None if fixed else scene,
         default_summary if summary is None else summary,
         tuple(sorted(kwargs.items())),
+        bool(shared_step),
     )
     inputs = {"state": states} if params is None else {"state": states, "params": params}
     meta = dict(metadata or {})
     meta["simulate"] = {
         "kwargs": {k: _describe(v) for k, v in member.kwargs},
         "summary": getattr(member.summary, "__qualname__", _describe(member.summary)),
+        "shared_step": member.lockstep,
     }
     return run(
         member,
@@ -126,6 +145,7 @@ def simulate_many(
         devices=devices,
         info=info,
         order=order,
+        batched=member.lockstep,
     )
 
 
@@ -138,15 +158,28 @@ def _describe(value) -> str:
 
 
 class _Member(NamedTuple):
-    """One member's simulation; hashable, so equal settings reuse the compiled program."""
+    """One member's simulation (or, ``lockstep``, one chunk's); hashable, so equal settings
+    reuse the compiled program."""
 
     scene_fn: Callable[[Any], Scene] | None
     summary: Callable[[Trajectory], dict[str, jax.Array]]
     kwargs: tuple
+    lockstep: bool = False
 
     def __call__(self, member, shared):
         shared = dict(shared)
         ts = shared.pop("ts")
-        scene = shared.pop("scene") if self.scene_fn is None else self.scene_fn(member["params"])
-        traj = simulate(scene, member["state"], ts, **shared, **dict(self.kwargs))
-        return self.summary(traj)
+        kwargs = dict(self.kwargs)
+        if self.scene_fn is None:
+            scene = shared.pop("scene")
+        elif self.lockstep:
+            scene = jax.vmap(self.scene_fn)(member["params"])
+        else:
+            scene = self.scene_fn(member["params"])
+        if not self.lockstep:
+            return self.summary(simulate(scene, member["state"], ts, **shared, **kwargs))
+        traj = simulate_lockstep(
+            scene, member["state"], ts, batched_scene=self.scene_fn is not None, **shared,
+            **kwargs,
+        )
+        return jax.vmap(self.summary)(traj)

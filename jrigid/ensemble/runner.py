@@ -14,7 +14,10 @@ fixed chunk shape:
   finished chunks and computes only the rest.
 
 Members are computed independently: a member's outputs do not depend on the chunk,
-the padding or the number of devices it was computed with (bit for bit; tested).
+the padding or the number of devices it was computed with (bit for bit; tested). The
+exception is ``batched=True``, for functions that couple the members of a group on
+purpose (:func:`~jrigid.ensemble.simulate_lockstep`): there each device's share of a
+chunk is one group.
 
 Errors: bad inputs, a ``fn`` that does not return a dict of arrays and an ``out_dir``
 holding a different run raise ``ValueError`` before anything is computed. An error
@@ -97,8 +100,12 @@ def _check_inputs(named: list[tuple[str, np.ndarray]], check_finite: bool) -> in
     return n
 
 
-def _output_spec(fn, example) -> dict[str, tuple[tuple[int, ...], str]]:
-    """``{name: (per-member shape, dtype)}`` of ``fn``'s outputs, by abstract evaluation."""
+def _output_spec(fn, example, batch: int | None = None) -> dict[str, tuple[tuple[int, ...], str]]:
+    """``{name: (per-member shape, dtype)}`` of ``fn``'s outputs, by abstract evaluation.
+
+    ``batch``: ``fn`` is batched and ``example`` has that many members; each output must
+    have the leading axis ``batch``, which is stripped from the returned shapes.
+    """
     out = jax.eval_shape(lambda *args: fn(*args), *example)
     if not isinstance(out, dict) or not out:
         raise ValueError(
@@ -113,12 +120,23 @@ def _output_spec(fn, example) -> dict[str, tuple[tuple[int, ...], str]]:
                 f"fn's output {name!r} must be one array, got {type(value).__name__} "
                 "(flatten nested outputs into separate names)"
             )
-        spec[name] = (tuple(value.shape), np.dtype(value.dtype).str)
+        shape = tuple(value.shape)
+        if batch is not None:
+            if shape[:1] != (batch,):
+                raise ValueError(
+                    f"batched fn's output {name!r} has shape {shape}: it must have the "
+                    f"chunk's leading member axis ({batch})"
+                )
+            shape = shape[1:]
+        spec[name] = (shape, np.dtype(value.dtype).str)
     return spec
 
 
-def _compiled(fn, leaves, treedef, shared, batch: int, shard, devices):
+def _compiled(fn, leaves, treedef, shared, batch: int, shard, devices, batched: bool):
     """``jax.jit(jax.vmap(fn))`` lowered and compiled once for a chunk of ``batch`` members.
+
+    ``batched``: ``fn`` takes a whole group of members itself: each device calls it on
+    its own slice of the chunk (``jax.shard_map``, no communication between devices).
 
     ``shared`` is ``None`` or ``(leaves, treedef)`` of the values common to all members,
     passed (replicated) as traced arguments: ``fn(member, shared)``.
@@ -126,7 +144,7 @@ def _compiled(fn, leaves, treedef, shared, batch: int, shard, devices):
     avals = tuple((a.shape[1:], a.dtype.str) for a in leaves)
     s_leaves, s_treedef = shared if shared is not None else ([], None)
     s_avals = tuple((a.shape, a.dtype.str) for a in s_leaves)
-    key = (fn, treedef, avals, s_treedef, s_avals, batch, tuple(d.id for d in devices))
+    key = (fn, batched, treedef, avals, s_treedef, s_avals, batch, tuple(d.id for d in devices))
     try:
         hit = _COMPILED.get(key)
     except TypeError:  # unhashable fn
@@ -140,7 +158,18 @@ def _compiled(fn, leaves, treedef, shared, batch: int, shard, devices):
         else:
             common = jax.tree_util.tree_unflatten(s_treedef, s_values)
             one = lambda *m: fn(jax.tree_util.tree_unflatten(treedef, m), common)  # noqa: E731
-        return jax.vmap(one)(*xs)
+        return one(*xs) if batched else jax.vmap(one)(*xs)
+
+    program = chunk_fn
+    if batched:
+        member_spec = shard.spec
+        program = jax.shard_map(
+            chunk_fn,
+            mesh=shard.mesh,
+            in_specs=(sharding.replicated(shard).spec, *[member_spec] * len(leaves)),
+            out_specs=member_spec,
+            check_vma=False,  # diffrax's loops mix replicated and per-device carries
+        )
 
     replicated = sharding.replicated(shard)
     structs = [
@@ -148,7 +177,7 @@ def _compiled(fn, leaves, treedef, shared, batch: int, shard, devices):
     ]
     s_structs = [jax.ShapeDtypeStruct(a.shape, a.dtype, sharding=replicated) for a in s_leaves]
     start = time.perf_counter()
-    compiled = jax.jit(chunk_fn).lower(s_structs, *structs).compile()
+    compiled = jax.jit(program).lower(s_structs, *structs).compile()
     seconds = time.perf_counter() - start
     if key is not None:
         if len(_COMPILED) >= _COMPILED_MAX:
@@ -205,6 +234,7 @@ def run(
     check_finite: bool = True,
     info: dict[str, Any] | None = None,
     order: Any = None,
+    batched: bool = False,
 ) -> dict[str, np.ndarray]:
     """Evaluate ``fn`` on every member of ``inputs``: chunked, sharded, saved, resumable.
 
@@ -245,13 +275,23 @@ def run(
         check_finite: reject NaN/inf in float inputs (``ValueError``).
         info: optional dict, filled with run statistics: ``compile_seconds``,
             ``run_seconds``, ``chunks_computed``, ``chunks_loaded``, ``n_devices``,
-            ``batch`` (members per compiled call), ``chunk_size``, ``n_chunks``.
+            ``batch`` (members per compiled call), ``chunk_size``, ``n_chunks``,
+            ``group`` (members per call of a batched ``fn``; 1 otherwise).
         order: optional ``(N,)`` permutation: members are computed (and chunked, and
             stored) in the order ``inputs[order]``, and the results are put back in input
             order. Under ``vmap`` an adaptive solve runs until the slowest member of its
             chunk is done, so grouping members of similar cost raises the useful work
             (e.g. ``order=jrigid.stability.difficulty_order(proxy)``). It is part of the
             fingerprint a resumed run must match.
+        batched: ``fn`` takes a whole group of members (``member`` with a leading axis
+            ``G``) and returns outputs with that leading axis. A group is one device's
+            share of a chunk: ``G = batch / n_devices`` (``info["group"]``); each device
+            runs ``fn`` on its group independently (``jax.shard_map``). For functions
+            whose members are coupled on purpose, e.g.
+            :func:`~jrigid.ensemble.simulate_lockstep`: a member's outputs then depend on
+            its group, hence on ``chunk_size`` and the number of devices (both part of
+            what a resumed run must match), and on the padding of the last chunk (which
+            repeats its last member).
 
     Returns:
         ``dict[str, np.ndarray]``: each output of ``fn`` stacked over members, leading
@@ -286,20 +326,20 @@ def run(
         raise ValueError(f"metadata must be a dict, got {type(metadata).__name__}")
     devs = sharding.resolve_devices(devices)
     leaves = [a for _, a in named]
-    example = jax.tree_util.tree_unflatten(
-        treedef, [jax.ShapeDtypeStruct(a.shape[1:], a.dtype) for a in leaves]
-    )
-    if shared is None:
-        spec = _output_spec(fn, (example,))
-    else:
-        s_example = jax.tree_util.tree_unflatten(
-            s_treedef, [jax.ShapeDtypeStruct(a.shape, a.dtype) for a in s_leaves]
-        )
-        spec = _output_spec(fn, (example, s_example))
-
     size = min(chunk_size, n)
     n_chunks = math.ceil(n / size)
     batch = sharding.padded_size(size, len(devs))
+    group = batch // len(devs)
+    lead = (group,) if batched else ()
+    example = jax.tree_util.tree_unflatten(
+        treedef, [jax.ShapeDtypeStruct(lead + a.shape[1:], a.dtype) for a in leaves]
+    )
+    args = (example,)
+    if shared is not None:
+        args += (jax.tree_util.tree_unflatten(
+            s_treedef, [jax.ShapeDtypeStruct(a.shape, a.dtype) for a in s_leaves]
+        ),)
+    spec = _output_spec(fn, args, group if batched else None)
     meta = {
         "format": "jrigid.ensemble/1",
         "n_members": n,
@@ -316,6 +356,7 @@ def run(
         "outputs": {k: {"shape": list(s), "dtype": d} for k, (s, d) in spec.items()},
         "metadata": meta_user,
         "fn": getattr(fn, "__qualname__", type(fn).__name__),
+        "batched": {"group": group} if batched else False,
         "versions": storage.versions(),
         "created": storage.now(),
     }
@@ -358,7 +399,9 @@ def run(
         bar.update(sum(min(size, n - i * size) for i in range(n_chunks) if done[i]))
     try:
         if todo:
-            program, compile_seconds = _compiled(fn, leaves, treedef, s_pair, batch, shard, devs)
+            program, compile_seconds = _compiled(
+                fn, leaves, treedef, s_pair, batch, shard, devs, bool(batched)
+            )
             s_placed = sharding.place(s_leaves, sharding.replicated(shard))
 
         def finish(i, real, device_out):
@@ -398,6 +441,7 @@ def run(
             batch=batch,
             chunk_size=size,
             n_chunks=n_chunks,
+            group=group if batched else 1,
         )
     out = {k: np.concatenate([r[k] for r in results], axis=0) for k in spec}
     return out if inverse is None else {k: v[inverse] for k, v in out.items()}

@@ -3,7 +3,9 @@
 Every chunk is padded to a multiple of the device count and split along its leading
 (member) axis over ``Mesh(devices, ("members",))`` with ``PartitionSpec("members")``:
 each device runs the same vmapped program on its own slice. Members are independent, so
-no communication happens and every member's result is the same as on one device.
+no communication happens and every member's result is the same as on one device. (A
+batched function, ``run(..., batched=True)``, is called by each device on its own
+slice through ``jax.shard_map``: again without communication.)
 
 With several processes (``jax.distributed.initialize()``), the mesh may span devices
 of other hosts: :func:`place` builds the global array from each process's local copy

@@ -43,8 +43,11 @@ META_NAME = "meta.json"
 CHUNK_PATTERN = "chunk_{:05d}.npz"
 # Fields of meta.json a resumed run must reproduce exactly.
 MATCHED = (
-    "format", "n_members", "chunk_size", "n_chunks", "inputs", "shared", "outputs", "metadata"
+    "format", "n_members", "chunk_size", "n_chunks", "inputs", "shared", "outputs", "metadata",
+    "batched",
 )
+# Fields added after runs were first stored: their value when a stored meta.json lacks them.
+_DEFAULTS = {"batched": False}
 
 
 def versions() -> dict[str, str]:
@@ -148,7 +151,9 @@ def read_meta(out_dir: pathlib.Path) -> dict[str, Any] | None:
 
 def mismatches(stored: dict[str, Any], wanted: dict[str, Any]) -> list[str]:
     """Names of the fields a resumed run must reproduce that differ."""
-    return [k for k in MATCHED if stored.get(k) != wanted.get(k)]
+    return [
+        k for k in MATCHED if stored.get(k, _DEFAULTS.get(k)) != wanted.get(k, _DEFAULTS.get(k))
+    ]
 
 
 def remove_stale_temporaries(out_dir: pathlib.Path) -> None:

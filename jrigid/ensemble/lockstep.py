@@ -1,0 +1,248 @@
+"""One adaptive solve for a whole batch of members: :func:`simulate_lockstep`.
+
+``jax.vmap(jrigid.simulate)`` gives every member its own step-size control. The
+vmapped ``while`` loop still runs until the slowest member is done, and the per-member
+control (accept or reject, next step size, saving to ``ts``) is done for every member
+at every step: on a CPU that bookkeeping costs more than the vector field of a rigid
+body (``benchmarks/ensemble_throughput.py``).
+
+:func:`simulate_lockstep` integrates the batch as ONE system instead: the solver's
+state is the whole batch, the formulation's vector field and projection are vmapped over
+the members inside a single ``diffrax.diffeqsolve``, and the PID controller measures the
+error of a step as the largest member's RMS error (the RMS norm ``simulate`` applies to
+one member). A step is accepted when every member meets ``rtol``/``atol``, so each
+member is integrated with steps no larger than the hardest member needs; the step
+count is about the hardest member's. The outputs have the structure of
+``jax.vmap(simulate)``: every leaf of the :class:`~jrigid.trajectory.Trajectory` has a
+leading member axis ``N``.
+
+What changes against ``jax.vmap(simulate)``:
+
+- a member's result depends (within the tolerance) on the other members of its batch;
+  the same batch gives the same result bit for bit;
+- the solve is shared, and so is its outcome: if it stops early (``max_steps``, a step
+  size collapse, a member's vector field turning non-finite) every member stops at
+  that time; each member's ``result`` code then says what it saw (``nonfinite`` for the
+  member that turned non-finite, the solver's reason for the others) and its outputs
+  after ``t_stop`` are NaN;
+- the step counts in ``stats`` are the batch's, the same for every member;
+- formulations with a terminating event (``euler_angles``: gimbal lock) are refused,
+  since one member's event would stop the batch; ``dense`` output is not offered.
+"""
+
+from __future__ import annotations
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jax.typing import ArrayLike
+
+from jrigid._checks import is_traced
+from jrigid.formulations import AbstractFormulation, get_formulation
+from jrigid.integrate import (
+    ProjectedSolver,
+    _guard,
+    _normalised,
+    _raise_on_failure,
+    controller,
+    finish,
+    prepare,
+    problems,
+)
+from jrigid.scene import Scene
+from jrigid.state import State
+from jrigid.trajectory import Trajectory
+
+__all__ = ["simulate_lockstep"]
+
+
+class _Batched(AbstractFormulation):
+    """A formulation acting on a batch (leading axis ``N``) through ``vmap``.
+
+    ``scene_axis`` is ``0`` when the scene's arrays carry the member axis, else ``None``.
+    Only what the solver calls is provided: the vector field and the projection.
+    """
+
+    inner: AbstractFormulation
+    scene_axis: int | None = eqx.field(static=True)
+    name = "lockstep"
+
+    def vector_field(self, t, y, scene):
+        return jax.vmap(self.inner.vector_field, in_axes=(None, 0, self.scene_axis))(t, y, scene)
+
+    def project(self, y, scene):
+        return jax.vmap(self.inner.project, in_axes=(0, self.scene_axis))(y, scene)
+
+
+def _max_member_rms(scaled_error) -> jax.Array:
+    """The largest member's RMS of a batched scaled error (diffrax's default norm per member)."""
+    return jnp.max(jax.vmap(optx.rms_norm)(scaled_error))
+
+
+def _over_members(fn, scene_axis):
+    """``vmap`` of ``fn(scene, *member_args)`` over members (the scene batched or not)."""
+
+    def over(scene, *args):
+        if scene_axis is None and not args:
+            return fn(scene)
+        return jax.vmap(fn, in_axes=(scene_axis,) + (0,) * len(args))(scene, *args)
+
+    return over
+
+
+def _member_flags(formulation, scene, states, ts, rtol, atol, scene_axis):
+    """``(bad (N, K), messages (K,))``: :func:`jrigid.integrate.problems` for every member."""
+    messages: list[str] = []
+
+    def flags(scene_m, state):
+        checks = problems(formulation, scene_m, state, ts, rtol, atol)
+        messages[:] = [m for _, m in checks]
+        return jnp.stack([b for b, _ in checks])
+
+    return _over_members(flags, scene_axis)(scene, states), messages
+
+
+@eqx.filter_jit
+def _concrete_flags(formulation, scene, states, ts, rtol, atol, scene_axis):
+    return _member_flags(formulation, scene, states, ts, rtol, atol, scene_axis)[0]
+
+
+def _validate(formulation, scene, states, ts, rtol, atol, scene_axis) -> None:
+    """``ValueError`` naming the first failed check and its first member (concrete inputs)."""
+    if is_traced((scene, states, ts, rtol, atol)):
+        return
+    bad = np.asarray(_concrete_flags(formulation, scene, states, ts, rtol, atol, scene_axis))
+    if bad.any():
+        check = int(bad.any(axis=0).argmax())
+        member = int(bad[:, check].argmax())
+        messages = _member_flags(formulation, scene, states, ts, rtol, atol, scene_axis)[1]
+        raise ValueError(f"{messages[check]} (member {member} of {bad.shape[0]})")
+
+
+@eqx.filter_jit
+def _solve(scene, states, ts, rtol, atol, dt0, formulation, solver, adjoint, max_steps,
+           project, scene_axis):
+    bad, messages = _member_flags(formulation, scene, states, ts, rtol, atol, scene_axis)
+    # Guard only the (replicated) times: every member's solve depends on them, and a
+    # guarded member axis would be gathered to one device when the chunk is sharded.
+    ts = _guard(ts, list(zip(jnp.any(bad, axis=0), messages, strict=True)))
+    scene = eqx.tree_at(
+        lambda s: s.body, scene, _over_members(lambda b: b.check(), scene_axis)(scene.body)
+    )
+    y0 = _over_members(lambda sc, s: formulation.from_state(sc, _normalised(s)), scene_axis)(
+        scene, states
+    )
+    batched = _Batched(formulation, scene_axis)
+    if project:
+        solver = ProjectedSolver(solver, batched)
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(batched.vector_field),
+        solver,
+        ts[0],
+        ts[-1],
+        dt0,
+        y0,
+        args=scene,
+        saveat=diffrax.SaveAt(ts=ts, t1=True),
+        stepsize_controller=controller(ts, rtol, atol, norm=_max_member_rms),
+        adjoint=adjoint,
+        max_steps=max_steps,
+        throw=False,
+    )
+    stats = {k: sol.stats[k] for k in ("num_steps", "num_accepted_steps", "num_rejected_steps")}
+    ys = jax.tree_util.tree_map(lambda a: jnp.moveaxis(a, 1, 0), sol.ys)  # (N, T + 1, ...)
+    one = lambda sc, y: finish(sc, formulation, ts, sol.ts, y, sol.result, stats)  # noqa: E731
+    return _over_members(one, scene_axis)(scene, ys)
+
+
+def simulate_lockstep(
+    scene: Scene,
+    initial_states: State,
+    ts: ArrayLike,
+    *,
+    formulation: str | AbstractFormulation = "quaternion_acceleration",
+    solver: diffrax.AbstractSolver | None = None,
+    rtol: ArrayLike | None = None,
+    atol: ArrayLike | None = None,
+    max_steps: int = 100_000,
+    dt0: ArrayLike | None = None,
+    adjoint: diffrax.AbstractAdjoint | None = None,
+    project: bool = True,
+    batched_scene: bool = False,
+    throw: bool = True,
+) -> Trajectory:
+    """Integrate ``N`` members as one system with a shared adaptive step (see module doc).
+
+    Args:
+        scene: one :class:`~jrigid.scene.Scene` for all members, or (``batched_scene``)
+            a scene whose arrays have a leading member axis ``N`` (e.g.
+            ``jax.vmap(make_scene)(params)``).
+        initial_states: :class:`~jrigid.state.State` with leading axis ``N``
+            (``q (N, 4)``, ``qdot (N, 4)``, ``x, v (N, 3)`` in free flight).
+        ts: ``(T,)`` output times shared by all members, strictly increasing, ``T ≥ 2``.
+        formulation, solver, rtol, atol, max_steps, dt0, adjoint, project: as in
+            :func:`jrigid.simulate`; ``rtol``/``atol`` hold for every member. The
+            formulation must have no event (not ``"euler_angles"``).
+        batched_scene: whether ``scene`` carries the member axis.
+        throw: raise on failure (``SimulationError`` naming the first failed member, or
+            an ``equinox`` runtime error inside transformations); ``False``: per-member
+            ``Trajectory.result`` codes.
+
+    Returns:
+        :class:`~jrigid.trajectory.Trajectory` whose leaves all have leading axis ``N``
+        (as ``jax.vmap(simulate)`` returns); ``stats`` are the batch's step counts.
+
+    Raises:
+        ValueError: the checks of :func:`jrigid.simulate`, per member (the message names
+            the first bad member), states without a common leading axis, or a
+            formulation with an event.
+        SimulationError: a failed integration, when ``throw`` and values are concrete.
+    """
+    formulation = get_formulation(formulation)
+    if formulation.event() is not None:
+        raise ValueError(
+            f"the {formulation.name} formulation stops at an event (e.g. gimbal lock), which "
+            "in lockstep would stop every member: use jax.vmap(jrigid.simulate) or a "
+            "quaternion formulation"
+        )
+    if not isinstance(scene, Scene):
+        raise ValueError(f"scene must be a jrigid Scene, got {type(scene).__name__}")
+    if any(load.impulsive for load in scene.loads):
+        raise ValueError("a scene with a Floor bounces: use jrigid.contact.simulate_bounces")
+    if not isinstance(initial_states, State):
+        raise ValueError(
+            f"initial_states must be a jrigid State with a leading member axis, got "
+            f"{type(initial_states).__name__}"
+        )
+    leading = {jnp.shape(a)[0] if jnp.ndim(a) else None
+               for a in jax.tree_util.tree_leaves(initial_states)}
+    if len(leading) != 1 or None in leading or jnp.ndim(initial_states.q) != 2:
+        raise ValueError(
+            "initial_states must have one leading member axis on every array (q (N, 4), "
+            f"qdot (N, 4), ...), got shapes {jax.tree_util.tree_map(jnp.shape, initial_states)}"
+        )
+    solver = diffrax.Tsit5() if solver is None else solver
+    if not isinstance(solver, diffrax.AbstractSolver):
+        raise ValueError(f"solver must be a diffrax solver, got {solver!r}")
+    if not isinstance(max_steps, int) or max_steps < 1:
+        raise ValueError(f"max_steps must be a positive int, got {max_steps!r}")
+    adjoint = diffrax.RecursiveCheckpointAdjoint() if adjoint is None else adjoint
+    dtype = jnp.result_type(float)
+    states = jax.vmap(lambda s: prepare(scene, s, ts, rtol, atol, dtype)[0])(initial_states)
+    _, ts, rtol, atol = prepare(
+        scene, jax.tree_util.tree_map(lambda a: a[0], initial_states), ts, rtol, atol, dtype
+    )
+    formulation.check_scene(scene)
+    scene_axis = 0 if batched_scene else None
+    _validate(formulation, scene, states, ts, rtol, atol, scene_axis)
+    if dt0 is not None:
+        dt0 = jnp.asarray(dt0, dtype=dtype)
+        if not is_traced(dt0) and not bool(jnp.isfinite(dt0) & (dt0 > 0)):
+            raise ValueError(f"dt0 must be finite and > 0, got {dt0}")
+    project = bool(project) and formulation.carries_quaternion
+    traj = _solve(scene, states, ts, rtol, atol, dt0, formulation, solver, adjoint, max_steps,
+                  project, scene_axis)
+    return _raise_on_failure(traj, throw, ts, rtol, atol, max_steps)
