@@ -567,26 +567,37 @@ def simulate(
         validate(formulation, scene, state, ts, rtol, atol)
         traj = _solve_exact(scene, state, ts, rtol, atol, formulation, bool(dense))
         return _raise_on_failure(traj, throw, ts, rtol, atol, max_steps)
-    solver = diffrax.Tsit5() if solver is None else solver
-    if not isinstance(solver, diffrax.AbstractSolver):
-        raise ValueError(f"solver must be a diffrax solver, got {solver!r}")
-    adjoint = diffrax.RecursiveCheckpointAdjoint() if adjoint is None else adjoint
-    if not isinstance(max_steps, int) or max_steps < 1:
-        raise ValueError(f"max_steps must be a positive int, got {max_steps!r}")
-    dtype = jnp.result_type(float)
-    state, ts, rtol, atol = prepare(scene, initial_state, ts, rtol, atol, dtype)
+    solver, adjoint, dt0 = solver_options(solver, adjoint, max_steps, dt0)
+    state, ts, rtol, atol = prepare(scene, initial_state, ts, rtol, atol, jnp.result_type(float))
     formulation.check_scene(scene)
     validate(formulation, scene, state, ts, rtol, atol)
-    if dt0 is not None:
-        dt0 = jnp.asarray(dt0, dtype=dtype)
-        if not is_traced(dt0) and not bool(jnp.isfinite(dt0) & (dt0 > 0)):
-            raise ValueError(f"dt0 must be finite and > 0, got {dt0}")
     project = bool(project) and formulation.carries_quaternion
     traj = _solve(
         scene, state, ts, rtol, atol, dt0,
         formulation, solver, adjoint, max_steps, project, bool(dense),
     )
     return _raise_on_failure(traj, throw, ts, rtol, atol, max_steps)
+
+
+def solver_options(solver, adjoint, max_steps, dt0):
+    """Defaults and checks of the numerical solve's options: ``(solver, adjoint, dt0)``.
+
+    ``solver`` defaults to ``diffrax.Tsit5()``, ``adjoint`` to
+    ``diffrax.RecursiveCheckpointAdjoint()``; ``ValueError`` for a non-diffrax solver, a
+    ``max_steps`` that is not a positive int, or a concrete ``dt0`` that is not finite and
+    positive.
+    """
+    solver = diffrax.Tsit5() if solver is None else solver
+    if not isinstance(solver, diffrax.AbstractSolver):
+        raise ValueError(f"solver must be a diffrax solver, got {solver!r}")
+    adjoint = diffrax.RecursiveCheckpointAdjoint() if adjoint is None else adjoint
+    if not isinstance(max_steps, int) or max_steps < 1:
+        raise ValueError(f"max_steps must be a positive int, got {max_steps!r}")
+    if dt0 is not None:
+        dt0 = jnp.asarray(dt0, dtype=jnp.result_type(float))
+        if not is_traced(dt0) and not bool(jnp.isfinite(dt0) & (dt0 > 0)):
+            raise ValueError(f"dt0 must be finite and > 0, got {dt0}")
+    return solver, adjoint, dt0
 
 
 def _raise_on_failure(traj, throw, ts, rtol, atol, max_steps):

@@ -51,6 +51,7 @@ from jrigid.integrate import (
     finish,
     prepare,
     problems,
+    solver_options,
 )
 from jrigid.scene import Scene
 from jrigid.state import State
@@ -224,12 +225,7 @@ def simulate_lockstep(
             "initial_states must have one leading member axis on every array (q (N, 4), "
             f"qdot (N, 4), ...), got shapes {jax.tree_util.tree_map(jnp.shape, initial_states)}"
         )
-    solver = diffrax.Tsit5() if solver is None else solver
-    if not isinstance(solver, diffrax.AbstractSolver):
-        raise ValueError(f"solver must be a diffrax solver, got {solver!r}")
-    if not isinstance(max_steps, int) or max_steps < 1:
-        raise ValueError(f"max_steps must be a positive int, got {max_steps!r}")
-    adjoint = diffrax.RecursiveCheckpointAdjoint() if adjoint is None else adjoint
+    solver, adjoint, dt0 = solver_options(solver, adjoint, max_steps, dt0)
     dtype = jnp.result_type(float)
     states = jax.vmap(lambda s: prepare(scene, s, ts, rtol, atol, dtype)[0])(initial_states)
     _, ts, rtol, atol = prepare(
@@ -238,10 +234,6 @@ def simulate_lockstep(
     formulation.check_scene(scene)
     scene_axis = 0 if batched_scene else None
     _validate(formulation, scene, states, ts, rtol, atol, scene_axis)
-    if dt0 is not None:
-        dt0 = jnp.asarray(dt0, dtype=dtype)
-        if not is_traced(dt0) and not bool(jnp.isfinite(dt0) & (dt0 > 0)):
-            raise ValueError(f"dt0 must be finite and > 0, got {dt0}")
     project = bool(project) and formulation.carries_quaternion
     traj = _solve(scene, states, ts, rtol, atol, dt0, formulation, solver, adjoint, max_steps,
                   project, scene_axis)
