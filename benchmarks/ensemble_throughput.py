@@ -49,7 +49,9 @@ Usage::
     python benchmarks/ensemble_throughput.py            # full, N = 10⁴, a few minutes
     python benchmarks/ensemble_throughput.py --quick    # N = 10³, about 30-40 s
 
-Writes ``ensemble_throughput[_quick].json`` and ``.md`` to ``benchmarks/results/``.
+Writes ``ensemble_throughput[_quick].json`` and ``.md`` to ``benchmarks/results/``;
+``--figure PATH`` also draws the time for the map against the median error (the README's
+``benchmarks/figures/ensemble_throughput.png``).
 """
 
 from __future__ import annotations
@@ -76,6 +78,8 @@ def _parse(argv):
     parser.add_argument("--devices", type=int, default=None,
                         help="XLA host devices to force (default: usable cores)")
     parser.add_argument("--out", default=None, help="output directory (default benchmarks/results)")
+    parser.add_argument("--figure", default=None,
+                        help="also draw time for the map against error here (PNG)")
     return parser.parse_args(argv)
 
 
@@ -390,6 +394,47 @@ def report(res: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def figure(res: dict, path) -> pathlib.Path:
+    """Trajectories/s against median error, one labelled point per method (log-log).
+
+    The dashed line is the target, 100× the scipy loop's rate measured in the same run.
+    """
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(8.0, 5.6), layout="constrained")
+    FigureCanvasAgg(fig)
+    ax = fig.subplots()
+    placed: list[tuple[float, float]] = []
+    for i, (label, m) in enumerate(res["methods"].items()):
+        err, rate = m["errors"]["median"], m["throughput"]
+        peer = not label.startswith("jrigid")
+        ax.loglog([err], [rate], marker="s" if peer else "o", markersize=7,
+                  color="0.35" if peer else f"C{i % 10}")
+        # a label close to an earlier one (within 2× in error, 1.3× in rate) goes below
+        near = any(abs(np.log(err / e)) < np.log(2) and abs(np.log(rate / r)) < np.log(1.3)
+                   for e, r in placed)
+        placed.append((err, rate))
+        ax.annotate(label, (err, rate), textcoords="offset points",
+                    xytext=(7, -13 if near else -3), fontsize=7.5,
+                    weight="bold" if label == HEADLINE else "normal")
+    target = TARGET_SPEEDUP_SCIPY * res["methods"]["scipy DOP853 loop"]["throughput"]
+    ax.axhline(target, color="0.5", linestyle="--", linewidth=0.9)
+    ax.annotate(f"{TARGET_SPEEDUP_SCIPY:.0f}× the scipy loop", (ax.get_xlim()[0], target),
+                textcoords="offset points", xytext=(4, 4), fontsize=7.5, color="0.4")
+    ax.set_xlim(ax.get_xlim()[0], ax.get_xlim()[1] * 30)  # room for the labels
+    ax.set_xlabel("median final error (worst of relative ω and q) against the exact solution")
+    ax.set_ylabel("trajectories per second (after compilation)")
+    ax.set_title(f"Stability map of {res['n']:,} ω directions, 50 periods, rtol 1e-8",
+                 fontsize=10)
+    ax.grid(True, which="major", alpha=0.3)
+    fig.suptitle(res["machine_line"], fontsize=7)
+    path = pathlib.Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    return path
+
+
 # --------------------------------------------------------------------------- main
 
 
@@ -554,6 +599,8 @@ def main() -> dict:
     stem = "ensemble_throughput" + ("_quick" if args.quick else "")
     harness.write_json(out_dir / f"{stem}.json", res)
     harness.write_text(out_dir / f"{stem}.md", text)
+    if args.figure:
+        figure(res, args.figure)
     print(text)
     return res
 

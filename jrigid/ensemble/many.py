@@ -1,7 +1,7 @@
 """The common case of an ensemble: :func:`simulate_many`, :func:`jrigid.simulate` for every member.
 
 Per member (``jax.vmap(simulate)``, the default) or, with ``shared_step=True``, one
-lockstep solve per chunk (:func:`~jrigid.ensemble.simulate_lockstep`).
+lockstep solve per device's share of a chunk (:func:`~jrigid.ensemble.simulate_lockstep`).
 """
 
 from __future__ import annotations
@@ -158,7 +158,7 @@ def _describe(value) -> str:
 
 
 class _Member(NamedTuple):
-    """One member's simulation (or, ``lockstep``, one chunk's); hashable, so equal settings
+    """One member's simulation (``lockstep``: one group's); hashable, so equal settings
     reuse the compiled program."""
 
     scene_fn: Callable[[Any], Scene] | None

@@ -125,7 +125,7 @@ def _output_spec(fn, example, batch: int | None = None) -> dict[str, tuple[tuple
             if shape[:1] != (batch,):
                 raise ValueError(
                     f"batched fn's output {name!r} has shape {shape}: it must have the "
-                    f"chunk's leading member axis ({batch})"
+                    f"group's leading member axis ({batch})"
                 )
             shape = shape[1:]
         spec[name] = (shape, np.dtype(value.dtype).str)
