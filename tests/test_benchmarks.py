@@ -149,3 +149,52 @@ def test_quick_run_produces_table_plot_and_finite_errors(tmp_path):
     tte = data["problems"]["free_rotor"]["summary"]["time_to_error"][sve.DEFAULT]
     assert tte["0.0001"]["seconds"] is not None
     assert out["markdown"] == md
+
+
+# --------------------------------------------------------------------------- ensemble
+
+
+def _throughput_result(rates: dict[str, float]) -> dict:
+    """A result of ``ensemble_throughput`` with the given trajectories/s per method."""
+    import ensemble_throughput as et
+
+    methods = {
+        label: {"label": label, "setting": "-", "members_timed": 100, "throughput": rate,
+                "compile_seconds": None, "errors": {"median": 1e-6, "max": 2e-6}}
+        for label, rate in rates.items()
+    }
+    scipy = rates["scipy DOP853 loop"]
+    return {
+        "n": 100, "quick": True, "machine": {"load_average": [0, 0, 0],
+                                             "load_average_end": [0, 0, 0]},
+        "machine_line": "test machine", "n_devices": 1, "total_seconds": 1.0,
+        "reference_check": 1e-11, "reference_members": 5,
+        "steps": {"median": 10.0, "max": 12.0, "lockstep_useful": 0.9},
+        "methods": methods,
+        "verdict": {
+            "tsit5_vs_scipy_same_rtol": rates["jrigid Tsit5"] / scipy,
+            "tsit5_vs_scipy_matched": rates["jrigid Tsit5"] / scipy,
+            "exact_vs_scipy": rates["jrigid exact"] / scipy,
+            "tsit5_vs_mujoco": rates["jrigid Tsit5"] / rates["MuJoCo RK4 rollout"],
+            "exact_vs_mujoco": rates["jrigid exact"] / rates["MuJoCo RK4 rollout"],
+            "mujoco_error": 1e-6, "jrigid_error": 1e-6, "tsit5_scipy_met": False,
+            "exact_scipy_met": True, "headline": et.HEADLINE,
+            "headline_vs_scipy": rates[et.HEADLINE] / scipy,
+            "headline_vs_mujoco": rates[et.HEADLINE] / rates["MuJoCo RK4 rollout"],
+            "headline_scipy_met": rates[et.HEADLINE] / scipy >= et.TARGET_SPEEDUP_SCIPY,
+        },
+    }
+
+
+def test_ensemble_throughput_report_and_figure(tmp_path):
+    import ensemble_throughput as et
+
+    rates = {"jrigid Tsit5": 500.0, "jrigid exact": 1e5, et.HEADLINE: 4000.0,
+             "scipy DOP853 loop": 10.0, "MuJoCo RK4 rollout": 30.0}
+    text = et.report(_throughput_result(rates))
+    assert f"{et.HEADLINE}: 400.0× the scipy DOP853 loop" in text and "target met" in text
+    assert "| 50× |" in text  # Tsit5's ratio to the scipy loop in the table
+    rates[et.HEADLINE] = 900.0
+    assert "target NOT met" in et.report(_throughput_result(rates))
+    png = et.figure(_throughput_result(rates), tmp_path / "fig.png")
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
