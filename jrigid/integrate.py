@@ -366,8 +366,8 @@ def _solve(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoint, max_
         max_steps=max_steps,
         throw=False,
     )
-    stats = {k: sol.stats[k] for k in ("num_steps", "num_accepted_steps", "num_rejected_steps")}
-    return finish(scene, formulation, ts, sol.ts, sol.ys, sol.result, stats, sol.interpolation)
+    return finish(scene, formulation, ts, sol.ts, sol.ys, sol.result, sol.stats,
+                  sol.interpolation)
 
 
 def controller(ts, rtol, atol, norm=None) -> diffrax.PIDController:
@@ -387,14 +387,16 @@ def controller(ts, rtol, atol, norm=None) -> diffrax.PIDController:
     )
 
 
-def finish(scene, formulation, ts, saved_ts, saved_ys, sol_result, stats, interpolation=None):
+def finish(scene, formulation, ts, saved_ts, saved_ys, sol_result, sol_stats,
+           interpolation=None):
     """One member's :class:`~jrigid.trajectory.Trajectory` from a diffrax solution.
 
     Args:
         saved_ts: ``(T + 1,)`` ``sol.ts`` of ``SaveAt(ts=ts, t1=True)``.
         saved_ys: ``sol.ys``, leading axis ``T + 1``.
-        sol_result: ``sol.result``; stats: the step counts.
+        sol_result, sol_stats: ``sol.result`` and ``sol.stats`` (the step counts are kept).
     """
+    stats = {k: sol_stats[k] for k in ("num_steps", "num_accepted_steps", "num_rejected_steps")}
     # diffrax writes the final state into the first unfilled slot: on failure that is
     # not the last one. Keep only slots saved at their requested time; NaN elsewhere.
     valid = saved_ts[:-1] == ts

@@ -106,20 +106,17 @@ def _member_flags(formulation, scene, states, ts, rtol, atol, scene_axis):
     return _over_members(flags, scene_axis)(scene, states), messages
 
 
-@eqx.filter_jit
-def _concrete_flags(formulation, scene, states, ts, rtol, atol, scene_axis):
-    return _member_flags(formulation, scene, states, ts, rtol, atol, scene_axis)[0]
-
-
 def _validate(formulation, scene, states, ts, rtol, atol, scene_axis) -> None:
     """``ValueError`` naming the first failed check and its first member (concrete inputs)."""
     if is_traced((scene, states, ts, rtol, atol)):
         return
-    bad = np.asarray(_concrete_flags(formulation, scene, states, ts, rtol, atol, scene_axis))
+    bad, messages = eqx.filter_jit(_member_flags)(
+        formulation, scene, states, ts, rtol, atol, scene_axis
+    )
+    bad = np.asarray(bad)
     if bad.any():
         check = int(bad.any(axis=0).argmax())
         member = int(bad[:, check].argmax())
-        messages = _member_flags(formulation, scene, states, ts, rtol, atol, scene_axis)[1]
         raise ValueError(f"{messages[check]} (member {member} of {bad.shape[0]})")
 
 
@@ -153,9 +150,8 @@ def _solve(scene, states, ts, rtol, atol, dt0, formulation, solver, adjoint, max
         max_steps=max_steps,
         throw=False,
     )
-    stats = {k: sol.stats[k] for k in ("num_steps", "num_accepted_steps", "num_rejected_steps")}
     ys = jax.tree_util.tree_map(lambda a: jnp.moveaxis(a, 1, 0), sol.ys)  # (N, T + 1, ...)
-    one = lambda sc, y: finish(sc, formulation, ts, sol.ts, y, sol.result, stats)  # noqa: E731
+    one = lambda sc, y: finish(sc, formulation, ts, sol.ts, y, sol.result, sol.stats)  # noqa: E731
     return _over_members(one, scene_axis)(scene, ys)
 
 
@@ -227,10 +223,9 @@ def simulate_lockstep(
         )
     solver, adjoint, dt0 = solver_options(solver, adjoint, max_steps, dt0)
     dtype = jnp.result_type(float)
-    states = jax.vmap(lambda s: prepare(scene, s, ts, rtol, atol, dtype)[0])(initial_states)
-    _, ts, rtol, atol = prepare(
-        scene, jax.tree_util.tree_map(lambda a: a[0], initial_states), ts, rtol, atol, dtype
-    )
+    states, ts, rtol, atol = jax.vmap(
+        lambda s: prepare(scene, s, ts, rtol, atol, dtype), out_axes=(0, None, None, None)
+    )(initial_states)
     formulation.check_scene(scene)
     scene_axis = 0 if batched_scene else None
     _validate(formulation, scene, states, ts, rtol, atol, scene_axis)

@@ -160,18 +160,17 @@ def _compiled(fn, leaves, treedef, shared, batch: int, shard, devices, batched: 
             one = lambda *m: fn(jax.tree_util.tree_unflatten(treedef, m), common)  # noqa: E731
         return one(*xs) if batched else jax.vmap(one)(*xs)
 
+    replicated = sharding.replicated(shard)
     program = chunk_fn
     if batched:
-        member_spec = shard.spec
         program = jax.shard_map(
             chunk_fn,
             mesh=shard.mesh,
-            in_specs=(sharding.replicated(shard).spec, *[member_spec] * len(leaves)),
-            out_specs=member_spec,
+            in_specs=(replicated.spec, *[shard.spec] * len(leaves)),
+            out_specs=shard.spec,
             check_vma=False,  # diffrax's loops mix replicated and per-device carries
         )
 
-    replicated = sharding.replicated(shard)
     structs = [
         jax.ShapeDtypeStruct((batch, *a.shape[1:]), a.dtype, sharding=shard) for a in leaves
     ]
