@@ -391,6 +391,8 @@ def test_nan_start_of_a_body_raises_value_error_before_building_it(example):
     problem, data = tumbling(example)
     with pytest.raises(ValueError, match=r"params0\['shape'\] has NaN"):
         fit.fit(problem, {"shape": jnp.array([np.nan, 0.0]), "omega0": data[0]}, method="lm")
+    with pytest.raises(ValueError, match=r"raw must have shape \(\.\.\., 2\), got \(3,\)"):
+        fit.fit(problem, {"shape": jnp.zeros(3), "omega0": data[0]}, method="lm")
 
 
 @pytest.mark.parametrize(

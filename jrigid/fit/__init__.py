@@ -25,8 +25,11 @@ model is not degenerate and near the data: the initial spin from the first gyros
 sample (a gyroscope measures ω(t0) directly), and the shape from a rough guess of the
 moments, ordered like the body's axes and *not* a sphere or a symmetric body (where the
 motion depends on the shape only through degenerate limits) — the proportions of a
-box of about the right size (:func:`jrigid.inertia.box`) will do. If the verdict says
-the fit failed, try other starts.
+box of about the right size (:func:`jrigid.inertia.box`) will do. The loss of a long
+record has optima on the edge of the physical region (a rod, a flat body) that plain
+descent from a far start often ends in; fitting a growing record,
+``fit(..., horizons=(0.25, 0.5))``, avoids most of them. If the verdict says the fit
+failed, try other starts.
 
 Example: moment ratios and initial spin of a tumbling body from a noisy gyroscope::
 
