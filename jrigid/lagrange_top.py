@@ -167,9 +167,16 @@ def _safe_sqrt(x):
     return jnp.where(pos, jnp.sqrt(jnp.where(pos, x, 1.0)), 0.0)
 
 
-def _safe_div(a, b):
-    ok = b != 0
-    return jnp.where(ok, a / jnp.where(ok, b, 1.0), 0.0)
+def _safe_inv(x):
+    """``1/x``, and 0 where ``x = 0`` (finite derivative there)."""
+    ok = x != 0
+    return jnp.where(ok, 1.0 / jnp.where(ok, x, 1.0), 0.0)
+
+
+def _safe_rsqrt(x):
+    """``1/√x`` for ``x > 0``, and 0 elsewhere (finite derivative there)."""
+    ok = x > 0
+    return jnp.where(ok, jax.lax.rsqrt(jnp.where(ok, x, 1.0)), 0.0)
 
 
 def _sign(x):
@@ -417,12 +424,13 @@ def _prepare(moments, mass, com, g, q0, omega0):
     f2 = 2.0 * beta * u0 - p0 - a_spin * a_spin
     cpr = _largest_root(f2, beta * f1, beta * beta * f0)  # beta (u3 - u0)
     alive = cpr > 0
-    prod_roots = jnp.where(alive, -f0 / jnp.where(alive, cpr, 1.0), 0.0)  # x1 x2 <= 0
-    sum_roots = jnp.where(alive, (f1 - beta * prod_roots) / jnp.where(alive, cpr, 1.0), 0.0)
+    inv_c = _safe_inv(jnp.where(alive, cpr, 0.0))
+    prod_roots = -f0 * inv_c  # x1 x2 <= 0
+    sum_roots = (f1 - beta * prod_roots) * inv_c
     sq = _safe_sqrt(sum_roots * sum_roots - 4.0 * prod_roots)  # x2 - x1
     right = sum_roots >= 0
     big = 0.5 * (sum_roots + jnp.where(right, sq, -sq))  # the root of larger size
-    other = _safe_div(prod_roots, big)
+    other = prod_roots * _safe_inv(big)
     x2 = jnp.where(right, big, other)
     x1 = jnp.where(right, other, big)
 
@@ -437,20 +445,22 @@ def _prepare(moments, mass, com, g, q0, omega0):
     # The identities hold for the labelling u1 <= u2 <= 1 <= u3 of the deflated cubic; a
     # steady u (u2 = u1, e.g. an unstable equilibrium, where c' is a double root) needs none.
     moving_u = sq > 0
+    inv_omu1, inv_opu2, inv_gm = _safe_inv(omu1), _safe_inv(opu2), _safe_inv(gm)
     ok_b = alive & moving_u & (gm > 0) & (omu1 > 0)
-    omu2_b = _safe_div(dm * dm, omu1 * gm)
-    err_a = _safe_div(omu0 + jnp.abs(x2), omu2_a) + jnp.where(omu2_a > 0, 0.0, jnp.inf)
-    err_b = _safe_div(cpr + beta * omu0, gm) + jnp.where(ok_b, 0.0, jnp.inf)
+    omu2_b = dm * dm * inv_omu1 * inv_gm
+    err_a = (omu0 + jnp.abs(x2)) * _safe_inv(omu2_a) + jnp.where(omu2_a > 0, 0.0, jnp.inf)
+    err_b = (cpr + beta * omu0) * inv_gm + jnp.where(ok_b, 0.0, jnp.inf)
     use_b = ok_b & (err_b <= err_a)
     omu2 = jnp.where(use_b, omu2_b, omu2_a)
     ok_c = alive & moving_u & (opu2 * gpl > 0)
-    opu1 = jnp.where(ok_c, _safe_div(dp * dp, opu2 * gpl), jnp.maximum(opu0 + x1, 0.0))
+    opu1 = jnp.where(ok_c, dp * dp * inv_opu2 * _safe_inv(gpl), jnp.maximum(opu0 + x1, 0.0))
 
     # ---- the elliptic parameters
     den = cpr - beta * x1  # beta (u3 - u1)
-    m = jnp.clip(_safe_div(beta * sq, den), 0.0, 1.0)
+    inv_den = _safe_inv(jnp.maximum(den, 0.0))
+    m = jnp.clip(beta * sq * inv_den, 0.0, 1.0)
     tiny = jnp.finfo(den.dtype).tiny
-    m1 = jnp.clip(jnp.where(den > 0, _safe_div(cpr - beta * x2, den), 1.0), tiny, 1.0)
+    m1 = jnp.clip(jnp.where(den > 0, (cpr - beta * x2) * inv_den, 1.0), tiny, 1.0)
     wn = 0.5 * _safe_sqrt(den)
     timed = wn > 0
     wn_safe = jnp.where(timed, wn, 1.0)
@@ -458,39 +468,42 @@ def _prepare(moments, mass, com, g, q0, omega0):
     zero, one = jnp.zeros_like(m1), jnp.ones_like(m1)
     # sn0, cn0 >= 0 and the sign of udot0 (as sn0 cn0), linear in udot0 where it vanishes
     sigma_u = _sign(udot0)
-    sn0_r = _safe_div(udot0, _safe_sqrt(cpr * x2 * sq))
-    cn0_r = _safe_sqrt(_safe_div(x2, sq))
-    sn0_l = sigma_u * _safe_sqrt(_safe_div(-x1, sq))
-    cn0_l = _safe_div(sigma_u * udot0, _safe_sqrt(cpr * (-x1) * sq))
+    inv_sq = _safe_inv(sq)
+    sn0_r = udot0 * _safe_rsqrt(cpr * x2 * sq)
+    cn0_r = _safe_sqrt(x2 * inv_sq)
+    sn0_l = sigma_u * _safe_sqrt(-x1 * inv_sq)
+    cn0_l = sigma_u * udot0 * _safe_rsqrt(cpr * (-x1) * sq)
     sn0 = jnp.where(moving_u, jnp.where(right, sn0_r, sn0_l), 0.0)
     cn0 = jnp.where(moving_u, jnp.where(right, cn0_r, cn0_l), 1.0)
-    dn0 = jnp.where(den > 0, _safe_sqrt(_safe_div(cpr, den)), 1.0)
+    dn0 = jnp.where(den > 0, _safe_sqrt(cpr * inv_den), 1.0)
     rf = special.elliprf_sqrt(jnp.stack([zero, cn0]), jnp.stack([kp, dn0]), jnp.stack([one, one]))
     kk = rf[0]
     tau0 = sn0 * rf[1]
-    e_complete = special.ellipe(m1=m1)
     period = 2.0 * kk / wn_safe
 
     # ---- chi- = phi - psi, and chi+ = phi + psi at the quarter-shifted tau0 - K
-    n_m = _safe_div(sq, omu1)
-    e_m_b = _safe_div(dm, omu1 * _safe_sqrt(gm))
-    e_m_a = _sign(dm) * _safe_sqrt(_safe_div(omu2_a, omu1))
+    n_m = sq * inv_omu1
+    e_m_b = dm * inv_omu1 * _safe_rsqrt(gm)
+    e_m_a = _sign(dm) * _safe_sqrt(omu2_a * inv_omu1)
     e_m = jnp.where(use_b, e_m_b, e_m_a)
-    v_m = jnp.where(use_b | (e_m == 0), _safe_sqrt(gm), _safe_div(dm, omu1 * e_m))
+    v_m = jnp.where(use_b | (e_m == 0), _safe_sqrt(gm), dm * inv_omu1 * _safe_inv(e_m))
     wt_m = v_m * n_m / wn_safe
-    rate_m = (a_spin - w3) + _safe_div(dm, omu1)
-    n_p = _safe_div(opu1 * m + sq, opu2)
-    gp_sqrt = jnp.sqrt(gpl)
-    e_p = _safe_div(dp * kp, opu2 * gp_sqrt)
-    wt_p = _safe_div(gp_sqrt * kp * sq, wn_safe * opu2)
-    rate_p = (w3 - a_spin) + _safe_div(dp, opu2)
+    rate_m = (a_spin - w3) + dm * inv_omu1
+    n_p = (opu1 * m + sq) * inv_opu2
+    gp_sqrt = _safe_sqrt(gpl)
+    e_p = dp * kp * inv_opu2 * _safe_rsqrt(gpl)
+    wt_p = gp_sqrt * kp * sq * inv_opu2 / wn_safe
+    rate_p = (w3 - a_spin) + dp * inv_opu2
     s_, c_, d_, j_ = _quarter_shift(sn0, cn0, dn0, zero, kp)
     # one R_J call for the four integrals (complete and at tau0, both phases)
     (a_cm, ok_cm) = _complete_args(e_m, kp)
     (a_cp, ok_cp) = _complete_args(e_p, kp)
     (a_0m, ok_0m) = _partial_args(e_m, n_m, sn0, cn0, dn0)
     (a_0p, ok_0p) = _partial_args(e_p, n_p, s_, c_, d_)
-    rj = _rj(*(jnp.stack(x) for x in zip(a_cm, a_cp, a_0m, a_0p, strict=True)))
+    a_e = (zero, kp, one)  # R_D(0, m1, 1) = R_J(0, m1, 1, 1), for E(m)
+    rj = _rj(*(jnp.stack(x) for x in zip(a_cm, a_cp, a_0m, a_0p, a_e, strict=True)))
+    # E(m) = K - (m/3) R_D(0, m1, 1) (DLMF 19.25.1); only the derivative at e = 0 uses it
+    e_complete = kk - m / 3.0 * rj[4]
     egc_m = _complete(rj[0], ok_cm, e_m, kp, m1, e_complete)
     egc_p = _complete(rj[1], ok_cp, e_p, kp, m1, e_complete)
     eg0_m = _partial(rj[2], ok_0m, e_m, sn0)
@@ -642,9 +655,7 @@ def _evaluate(consts, t):
         2.0
         * c.wn
         * cr
-        * jnp.where(
-            ok_p, c.sq * c.kp * sr / d_p, _sign(sr) * dn * _safe_div(c.sq, _safe_sqrt(c.n_p))
-        )
+        * jnp.where(ok_p, c.sq * c.kp * sr / d_p, _sign(sr) * dn * c.sq * _safe_rsqrt(c.n_p))
     )
     im_p = c.opu2 * c.gp_sqrt / dn * jnp.where(ok_p, c.e_p / d_p, 0.0)
     big_r_p = jnp.sqrt(2.0 / jnp.where(c.opu2 > 0, c.opu2, 1.0)) * jax.lax.complex(re_p, im_p)

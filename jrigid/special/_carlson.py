@@ -292,7 +292,10 @@ def elliprj_sqrt(sx, sy, sz, sp, steps: int = _STEPS_RJ) -> jax.Array:
     (each step pulls small arguments up to the geometric means of the others); for
     ``x, y, p`` in ``[0, 1]`` and ``z = 1`` (Legendre's third-kind integral in
     Carlson's form, ``p = 1 − n sin²φ``) 12 steps suffice down to ``y = 1e-60``. Use
-    :func:`elliprj` (30 steps) when ``p`` may exceed the others by more.
+    :func:`elliprj` (30 steps) when ``p`` may exceed the others by more. When ``p`` is much
+    smaller than ``x`` (or ``y``, ``z``) the relative error grows like ``eps √(x/p)/20``
+    (the first duplication step's ``R_C`` term, shared with :func:`elliprj`); products
+    such as ``sp · R_J`` stay accurate to rounding.
 
     Args:
         sx, sy, sz: ``(...)`` arrays (broadcast), nonnegative, at most one zero.
