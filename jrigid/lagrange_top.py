@@ -25,9 +25,11 @@ is the largest root of ``c³ + f2 c² + β f1 c + β² f0`` (trigonometric formu
 Newton; the last step carries the derivative of the implicit function), which stays
 well-defined as ``β → 0`` (no gravity, or the pivot at the centre of mass); then
 ``x1 x2 = −f0/c'`` (≤ 0) and ``x1 + x2 = (f1 + β f0/c')/c'`` give the other two roots
-without cancellation. Distances to the poles, ``1 − u2`` and ``1 + u1``, come from
-``(b ∓ a)² = β (1 ∓ u1)(1 ∓ u2)(u3 ∓ 1)``, so that they stay consistent with ``b ∓ a``
-however close the top comes to the vertical (or to hanging straight down).
+without cancellation. Near the separatrix of the sleeping top ``u2`` and ``u3`` are close
+and the smallest root is found first instead. Distances to the poles, ``1 − u2`` and
+``1 + u1``, come from ``(b ∓ a)² = β (1 ∓ u1)(1 ∓ u2)(u3 ∓ 1)``, so that they stay
+consistent with ``b ∓ a`` however close the top comes to the vertical (or to hanging
+straight down).
 
 *Orientation without gimbal lock.* In a space frame whose ``z`` axis is ``ẑ`` (fixed
 rotation ``Q_v``), with ZXZ angles ``φ, θ, ψ``, the quaternion is
@@ -44,10 +46,10 @@ quarter-period shift ``τ' = τ − K`` (``sn τ = cd τ'``), ``∫ dτ/(1 + u) 
 /(1 + u2)`` with ``N = ((1 + u1) m + u2 − u1)/(1 + u2)``; both characteristics lie in
 ``[m, 1]``. The weight of ``G`` is proportional to ``e = ±√(1 − n)`` (``e₋ ∝ b − a``,
 ``e₊ ∝ b + a``), so each phase is carried as ``W̃ · (e G)``: as the top passes ever closer to
-the vertical, ``e G`` sharpens into a step of ``±π`` per passage (the half-angle changes
-sign), and at exactly ``b = a`` that step is taken from the closed-form limit
-``e R_J(0, m1, 1, e²)/3 → ±π/(2√m1) − e E(m)/m1``. A start exactly at a pole takes the phase
-of the departure direction (``ż₋ = ½ z₊ (ω1 + iω2)`` at ``θ = 0``).
+the vertical, ``χ₋`` steps by ``±2π`` at each passage (the half-angle components change
+sign; likewise ``χ₊`` near the bottom), and at exactly ``b = a`` that step is taken from the
+closed-form limit ``e R_J(0, m1, 1, e²)/3 → ±π/(2√m1) − e E(m)/m1``. A start exactly at a
+pole takes the phase of the departure direction (``ż₋ = ½ z₊ (ω1 + iω2)`` at ``θ = 0``).
 
 *Angular velocity.* ``ω3`` is constant; ``ω1 + iω2 = e^{−iψ}(θ̇ + i φ̇ sin θ)`` is written as
 ``½ e^{i(χ₋−χ₊)/2}(C₊ R₋ − S₋ R̄₊)`` with ``R₋ = (−u̇ + i(b − a))/S₋`` and
@@ -91,7 +93,7 @@ from jax.typing import ArrayLike
 
 from jrigid import quaternion as quat
 from jrigid import special
-from jrigid._checks import fail_if
+from jrigid._checks import fail_if, is_traced
 from jrigid.scene import Gravity, Pivot, Scene
 
 __all__ = [
@@ -211,12 +213,14 @@ def _unit_complex(z, fallback):
     return jnp.where(ok, z / r, fallback)
 
 
-def _largest_root(a2, a1, a0):
-    """Largest real root of ``c³ + a2 c² + a1 c + a0`` (all roots real); differentiable.
+def _outer_roots(a2, a1, a0):
+    """Smallest and largest root of ``c³ + a2 c² + a1 c + a0`` (three real roots).
 
-    The trigonometric formula gives a start, Newton's method (monotone from the right of
-    the local minimum) polishes it, and one last Newton step on the traced coefficients
-    carries the derivative ``dc = −(dg)/g'(c)`` of the implicit function.
+    Returns ``(c_lo, c_hi, c_mid)``: the outer roots, differentiable, and an estimate of
+    the middle one (no derivative). The trigonometric formula gives starts, Newton's method
+    polishes the outer roots (monotone from outside the critical points, where the cubic
+    is convex or concave), and one last Newton step on the traced coefficients carries
+    the derivative ``dc = −(dg)/g'(c)`` of the implicit function.
     """
 
     def g(c, a2, a1, a0):
@@ -232,12 +236,16 @@ def _largest_root(a2, a1, a0):
     r2 = jnp.maximum(-p / 3.0, 0.0)
     r = jnp.sqrt(r2)
     ok = r > 0
-    arg = jnp.clip(-q / (2.0 * jnp.where(ok, r * r2, 1.0)), -1.0, 1.0)
-    y = jnp.where(ok, 2.0 * r * jnp.cos(jnp.arccos(arg) / 3.0), jnp.cbrt(-q))
-    c = y - shift
-    # the larger critical point (local minimum); the largest root lies at or right of it
-    cmin = (jnp.sqrt(jnp.maximum(b2 * b2 - 3.0 * b1, 0.0)) - b2) / 3.0
-    c = jnp.maximum(c, cmin)
+    angle = jnp.arccos(jnp.clip(-q / (2.0 * jnp.where(ok, r * r2, 1.0)), -1.0, 1.0)) / 3.0
+    third = 2.0 * math.pi / 3.0
+    c_lo, c_hi, c_mid = (
+        jnp.where(ok, 2.0 * r * jnp.cos(angle - k * third), jnp.cbrt(-q)) - shift
+        for k in (2.0, 0.0, 1.0)
+    )
+    # the roots lie outside the critical points (local maximum and minimum)
+    disc = jnp.sqrt(jnp.maximum(b2 * b2 - 3.0 * b1, 0.0))
+    c = jnp.stack([jnp.minimum(c_lo, -(disc + b2) / 3.0), jnp.maximum(c_hi, (disc - b2) / 3.0)])
+    b2, b1, b0, a2, a1, a0 = (x[None] for x in (b2, b1, b0, a2, a1, a0))  # both roots at once
 
     def newton(_, c):
         d = gp(c, b2, b1)
@@ -245,7 +253,52 @@ def _largest_root(a2, a1, a0):
 
     c = jax.lax.stop_gradient(jax.lax.fori_loop(0, _NEWTON_STEPS, newton, c))
     d = gp(c, a2, a1)
-    return c - jnp.where(d > 0, g(c, a2, a1, a0) / jnp.where(d > 0, d, 1.0), 0.0)
+    c = c - jnp.where(d > 0, g(c, a2, a1, a0) / jnp.where(d > 0, d, 1.0), 0.0)
+    return c[0], c[1], c_mid
+
+
+def _roots(f0, f1, f2, beta):
+    """Roots of ``f(u0 + x) = β x³ + f2 x² + f1 x + f0`` as ``(c', x1, x2, x2 − x1, γ)``.
+
+    ``c' = β x3`` and ``γ = c' − β x2 = β (u3 − u2)``, with ``x1 ≤ 0 ≤ x2``. The roots of
+    ``c³ + f2 c² + β f1 c + β² f0`` are ``β x1 ≤ β x2 ≤ c'``. Usually ``c'`` is well separated
+    and is found first, ``x1, x2`` following from ``x1 x2 = −f0/c'`` and ``x1 + x2 =
+    (f1 − β x1 x2)/c'``. Near the separatrix of the sleeping top ``β x2`` and ``c'`` nearly
+    coincide; then the smallest root is found first and the close pair comes from
+    ``(β x2) c' = −β² f0/(β x1)``, ``β x2 + c' = (β f1 − (β x2) c')/(β x1)``, without
+    cancellation.
+    """
+    r_lo, r_hi, r_mid = _outer_roots(f2, beta * f1, beta * beta * f0)
+    # Newton from the trigonometric start (off by up to ~√eps of the scale when two roots
+    # nearly coincide) converges to c' unless the upper pair is that close
+    close_top = (beta > 0) & (r_lo < 0) & (r_hi - r_mid < 1e-4 * (r_mid - r_lo))
+    # largest root first
+    inv_c = _safe_inv(jnp.where(r_hi > 0, r_hi, 0.0))
+    prod_roots = -f0 * inv_c  # x1 x2 <= 0
+    sum_roots = (f1 - beta * prod_roots) * inv_c
+    sq = _safe_sqrt(sum_roots * sum_roots - 4.0 * prod_roots)  # x2 - x1
+    right = sum_roots >= 0
+    big = 0.5 * (sum_roots + jnp.where(right, sq, -sq))  # the root of larger size
+    other = prod_roots * _safe_inv(big)
+    x2 = jnp.where(right, big, other)
+    x1 = jnp.where(right, other, big)
+    # smallest root first
+    inv_lo = _safe_inv(jnp.where(close_top, r_lo, -1.0))
+    pair_prod = -beta * beta * f0 * inv_lo  # (beta x2) c' >= 0
+    pair_sum = (beta * f1 - pair_prod) * inv_lo  # beta x2 + c' >= 0
+    pair_gap = _safe_sqrt(pair_sum * pair_sum - 4.0 * pair_prod)  # c' - beta x2
+    top = 0.5 * (pair_sum + pair_gap)
+    mid = pair_prod * _safe_inv(top)
+    inv_beta = _safe_inv(beta)
+    # c' = 0: u0 = u2 = u3 = 1, the top is at rest on the unstable equilibrium upright
+    upright = top <= 0
+    return (
+        jnp.where(close_top, top, r_hi),
+        jnp.where(close_top, jnp.where(upright, 0.0, r_lo * inv_beta), x1),
+        jnp.where(close_top, mid * inv_beta, x2),
+        jnp.where(close_top, jnp.where(upright, 0.0, (mid - r_lo) * inv_beta), sq),
+        jnp.where(close_top, pair_gap, r_hi - beta * x2),
+    )
 
 
 def _quarter_shift(sr, cr, dr, j, kp):
@@ -422,17 +475,9 @@ def _prepare(moments, mass, com, g, q0, omega0):
     f0 = udot0 * udot0
     f1 = 2.0 * a_spin * h0 - 2.0 * u0 * p0 - beta * s2
     f2 = 2.0 * beta * u0 - p0 - a_spin * a_spin
-    cpr = _largest_root(f2, beta * f1, beta * beta * f0)  # beta (u3 - u0)
+    cpr, x1, x2, sq, gap = _roots(f0, f1, f2, beta)  # cpr = beta (u3 - u0)
     alive = cpr > 0
-    inv_c = _safe_inv(jnp.where(alive, cpr, 0.0))
-    prod_roots = -f0 * inv_c  # x1 x2 <= 0
-    sum_roots = (f1 - beta * prod_roots) * inv_c
-    sq = _safe_sqrt(sum_roots * sum_roots - 4.0 * prod_roots)  # x2 - x1
-    right = sum_roots >= 0
-    big = 0.5 * (sum_roots + jnp.where(right, sq, -sq))  # the root of larger size
-    other = prod_roots * _safe_inv(big)
-    x2 = jnp.where(right, big, other)
-    x1 = jnp.where(right, other, big)
+    right = x1 + x2 >= 0
 
     # ---- distances to the poles, consistent with b -+ a
     dm = h0 - a_spin * omu0  # b - a
@@ -460,7 +505,7 @@ def _prepare(moments, mass, com, g, q0, omega0):
     inv_den = _safe_inv(jnp.maximum(den, 0.0))
     m = jnp.clip(beta * sq * inv_den, 0.0, 1.0)
     tiny = jnp.finfo(den.dtype).tiny
-    m1 = jnp.clip(jnp.where(den > 0, (cpr - beta * x2) * inv_den, 1.0), tiny, 1.0)
+    m1 = jnp.clip(jnp.where(den > 0, gap * inv_den, 1.0), tiny, 1.0)
     wn = 0.5 * _safe_sqrt(den)
     timed = wn > 0
     wn_safe = jnp.where(timed, wn, 1.0)
@@ -584,6 +629,9 @@ def _expand(consts: TopConstants, extra: int) -> TopConstants:
 
 def evaluate(consts: TopConstants, t: ArrayLike) -> tuple[jax.Array, jax.Array]:
     """Orientation and body angular velocity of the top at times ``t`` (any shape ``S``).
+
+    The exact solution of Euler's equations about the pivot with the gravity torque
+    (eq. 17.35) and the quaternion kinematics (eq. 17.44); see the module docstring.
 
     Args:
         consts: from :func:`prepare`, batch shape ``B``.
@@ -733,8 +781,7 @@ def _problems(scene: Scene) -> list[str]:
     if others:
         problems.append(f"its only loads may be Gravity, the scene has {', '.join(others)}")
     body = scene.body
-    concrete = not any(isinstance(x, jax.core.Tracer) for x in (body.moments, body.com, body.mass))
-    if concrete:
+    if not is_traced(body.moments, body.com, body.mass):
         moments, com = np.asarray(body.moments), np.asarray(body.com)
         if moments.shape != (3,) or com.shape != (3,):
             problems.append("it needs one body (moments (3,), com (3,)); vmap for batches")

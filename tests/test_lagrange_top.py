@@ -413,6 +413,24 @@ def test_special_motions_against_dop853(cases):
         assert np.abs(w[k] - w_ref[k]).max() < 2e-11 * scale, name
 
 
+def test_near_the_separatrix_of_the_sleeping_top():
+    """An unstable sleeping top nudged by ``ε`` falls and comes back up once a period: the
+    period grows by ``2 ln(10³)/λ`` per factor 10³ in ``ε``, with ``λ = √(Mgl/A − (Cω3/2A)²)``
+    the growth rate of a small tilt at the upright position; the motion is DOP853's (whose
+    error the unstable equilibrium amplifies to ~1e-11 by t = 30)."""
+    nudges = [1e-3, 1e-6, 1e-9, 1e-12]
+    cases = [TOP + ((1.0, 0.0, 0.0, 0.0), (eps, 0.0, 1.0)) for eps in nudges]
+    ts = np.array([0.0, 2.0, 5.0, 10.0, 20.0, 30.0])
+    q, w, consts = _solve(cases, [ts] * len(cases))
+    period = np.asarray(lagrange_top.nutation_period(consts))[: len(cases)]
+    big_a, big_c, mgl, w3 = 2.0, 0.5, 1.0, 1.0
+    growth = math.sqrt(mgl / big_a - (big_c * w3 / (2 * big_a)) ** 2)
+    # corrections are O(ε²) relative: 1e-6 for the first step
+    np.testing.assert_allclose(np.diff(period), 2 * math.log(1e3) / growth, rtol=1e-5)
+    q_ref, w_ref = _dop853(cases[1:], ts)
+    assert _qdist(q[1:], q_ref).max() < 2e-10 and np.abs(w[1:] - w_ref).max() < 2e-10
+
+
 def test_sleeping_top_and_equilibria_exact():
     """Spinning upright (stable or not) or hanging: ``q = q0 ⊗ (cos ω3t/2, 0, 0, sin ω3t/2)``."""
     ts = np.array([0.0, 0.5, 3.0, 40.0, 700.0, 1e4])
