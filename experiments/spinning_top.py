@@ -184,7 +184,8 @@ def main(
         f"{numbers['theta_min_deg_measured']:.4f}° – {numbers['theta_max_deg_measured']:.4f}°); "
         f"its tip traces **{kind}**. Along the closed form energy, L_z and L·e3 stay constant "
         f"to {max(drift.values()):.1e}. Cost: {1e6 * t_closed / n:.2f} µs per sample after a "
-        f"{t_compile:.1f} s compile, against {t_integrated:.2f} s for the integration."
+        f"{t_compile:.1f} s compile, against {t_integrated:.2f} s for the integration "
+        "(compilation included)."
     )
     rep.figure("tops", _draw_tops(scene, radius, z0, q_np, np.asarray(traj.q), axle,
                np.asarray(traj.axes[:, :, 2])), caption="left: closed form; right: integrated; "
