@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 from jax.typing import ArrayLike
 
+from jrigid import linalg
 from jrigid._checks import is_traced  # noqa: F401  (re-exported for the quaternion modules)
 
 
@@ -60,12 +61,10 @@ def safe_norm(v: jax.Array, axis: int = -1) -> jax.Array:
 
 
 def cross(a: jax.Array, b: jax.Array) -> jax.Array:
-    """Cross product of ``(..., 3)`` arrays with equal batch shape."""
-    ax, ay, az = a[..., 0], a[..., 1], a[..., 2]
-    bx, by, bz = b[..., 0], b[..., 1], b[..., 2]
-    return jnp.stack([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx], axis=-1)
+    """Cross product of ``(..., 3)`` arrays (:func:`jrigid.linalg.cross`)."""
+    return linalg.cross(a, b)
 
 
 def dot(a: jax.Array, b: jax.Array) -> jax.Array:
-    """Dot product over the last axis; batch shapes must already agree."""
-    return jnp.sum(a * b, axis=-1)
+    """Dot product over the last axis (:func:`jrigid.linalg.dot`, no reduction op)."""
+    return linalg.dot(a, b)

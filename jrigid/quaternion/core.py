@@ -140,7 +140,7 @@ def normalize(q: ArrayLike) -> jax.Array:
     # ``q * rsqrt(s)`` only where the sqrt has no other use, so the same step rounded
     # differently when recomputed inside a reverse pass (where the sqrt is reused),
     # and checkpointed gradients through projected solves drifted (up to 1e-3).
-    return q * lax.rsqrt(jnp.sum(q * q, axis=-1, keepdims=True))
+    return q * lax.rsqrt(dot(q, q)[..., None])
 
 
 def inverse(q: ArrayLike) -> jax.Array:
@@ -155,7 +155,7 @@ def inverse(q: ArrayLike) -> jax.Array:
         ``(..., 4)``.
     """
     q = as_float(q)
-    return conjugate(q) / jnp.sum(q * q, axis=-1, keepdims=True)
+    return conjugate(q) / dot(q, q)[..., None]
 
 
 def canonicalize(q: ArrayLike) -> jax.Array:
@@ -193,8 +193,8 @@ def rotate(q: ArrayLike, v: ArrayLike) -> jax.Array:
     q, v = broadcast_batch(q, 1, v, 1)
     w, u = q[..., :1], q[..., 1:]
     return (
-        (w * w - jnp.sum(u * u, axis=-1, keepdims=True)) * v
-        + 2.0 * jnp.sum(u * v, axis=-1, keepdims=True) * u
+        (w * w - dot(u, u)[..., None]) * v
+        + 2.0 * dot(u, v)[..., None] * u
         + 2.0 * w * cross(u, v)
     )
 
