@@ -25,6 +25,7 @@ from jrigid._checks import as_float
 __all__ = [
     "box",
     "check",
+    "conditions",
     "disk",
     "ellipsoid",
     "from_point_masses",
@@ -387,6 +388,21 @@ def _conditions(inertia: jax.Array, kind: str, allow_nonphysical: bool, rtol):
             )
         )
     return out
+
+
+def conditions(inertia, *, allow_nonphysical: bool = False, kind: str | None = None, rtol=None):
+    """The checks of :func:`validate` as traced flags: ``[(name, bad, label, values), ...]``.
+
+    Args:
+        inertia: moments ``(..., 3)`` or tensor ``(..., 3, 3)``.
+        allow_nonphysical, kind, rtol: as :func:`validate`.
+
+    Returns:
+        One entry per condition, in report order: its name, ``bad (...)`` (batch
+        shape), and the label and values a message would quote.
+    """
+    inertia = as_float(inertia)
+    return _conditions(inertia, _kind(inertia, kind), allow_nonphysical, rtol)
 
 
 def check(inertia, *, allow_nonphysical: bool = False, kind: str | None = None, rtol=None):
