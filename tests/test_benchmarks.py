@@ -132,11 +132,13 @@ def test_quick_run_produces_table_plot_and_finite_errors(tmp_path):
     out = sve.main(["--quick", "--out", str(tmp_path), "--quiet"])
     md = (tmp_path / "speed_vs_error_quick.md").read_text()
     assert "| method | compile |" in md and "scipy DOP853 / jrigid default" in md
+    assert "better hand-written diffrax / jrigid default" in md
     assert "Machine: " in md
     assert (tmp_path / "speed_vs_error_quick.png").read_bytes()[:4] == b"\x89PNG"
     data = json.loads((tmp_path / "speed_vs_error_quick.json").read_text())
     methods = data["problems"]["free_rotor"]["methods"]
-    assert {sve.DEFAULT, "scipy DOP853", "scipy RK45"} <= set(methods)
+    assert {sve.DEFAULT, sve.OLD_DEFAULT, sve.PEER, f"{sve.HAND} + Tsit5",
+            f"{sve.HAND} + Dopri8"} <= set(methods)
     assert methods[sve.DEFAULT]["compile_seconds"] > 0
     for label, m in methods.items():
         pts = m["points"]
