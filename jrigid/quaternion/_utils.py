@@ -2,11 +2,17 @@
 
 from __future__ import annotations
 
+import math
+
 import jax
 import jax.numpy as jnp
+from jax import lax
 from jax.typing import ArrayLike
 
-from jrigid._checks import is_traced  # noqa: F401  (re-exported for the quaternion modules)
+from jrigid._checks import (
+    check_shape,
+    is_traced,  # noqa: F401  (re-exported for the quaternion modules)
+)
 
 
 def as_float(x: ArrayLike) -> jax.Array:
@@ -27,6 +33,52 @@ def as_float_all(*xs: ArrayLike) -> tuple[jax.Array, ...]:
     arrays = [as_float(x) for x in xs]
     dtype = jnp.result_type(*arrays)
     return tuple(a.astype(dtype) for a in arrays)
+
+
+def quaternion_arg(q: ArrayLike, name: str = "q") -> jax.Array:
+    """``q`` as a float array, after checking its trailing shape is ``(4,)`` (static)."""
+    return check_shape(as_float(q), f"{name} (a quaternion (w, x, y, z))", (4,))
+
+
+def vector_arg(v: ArrayLike, name: str) -> jax.Array:
+    """``v`` as a float array, after checking its trailing shape is ``(3,)`` (static)."""
+    return check_shape(as_float(v), f"{name} (a 3-vector)", (3,))
+
+
+def matrix_arg(m: ArrayLike, name: str = "matrix") -> jax.Array:
+    """``m`` as a float array, after checking its trailing shape is ``(3, 3)`` (static)."""
+    return check_shape(as_float(m), f"{name} (a 3x3 matrix)", (3, 3))
+
+
+def rescale(x: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """Split ``x (..., n)`` into ``(x / s, s)`` so that squaring ``x / s`` is safe.
+
+    ``s (..., 1)`` is ``1`` (and ``x`` is returned unchanged, bit for bit) unless the
+    largest ``|component|`` lies outside ``[sqrt(tiny)/eps, sqrt(max)/(2n)]``, where the
+    sum of squares would overflow or lose precision; then ``s`` is that largest
+    component, so ``x / s`` has entries in ``[-1, 1]``. A zero or non-finite ``x`` keeps
+    ``s = 1``. ``s`` carries no gradient: functions of ``x`` that are homogeneous
+    (``normalize``, ``norm``, the conversions) then still get exact derivatives.
+    """
+    info = jnp.finfo(x.dtype)
+    lo = math.sqrt(float(info.tiny)) / float(info.eps)
+    hi = math.sqrt(float(info.max)) / (2.0 * x.shape[-1])
+    m = jnp.max(jnp.abs(x), axis=-1, keepdims=True)
+    keep = ((m >= lo) & (m <= hi)) | (m == 0) | ~jnp.isfinite(m)
+    s = lax.stop_gradient(jnp.where(keep, jnp.ones_like(m), m))
+    return x / s, s
+
+
+def unit(x: jax.Array) -> jax.Array:
+    """``x / |x|`` along the last axis, safe for any finite non-zero scale (``0`` gives NaN).
+
+    One ``rsqrt``, not a division by ``sqrt``: XLA rewrites ``x / sqrt(s)`` into
+    ``x * rsqrt(s)`` only where the ``sqrt`` has no other use, so the same step rounded
+    differently when recomputed inside a reverse pass (where the ``sqrt`` is reused),
+    and checkpointed gradients through projected solves drifted (up to 1e-3).
+    """
+    x, _ = rescale(x)
+    return x * lax.rsqrt(jnp.sum(x * x, axis=-1, keepdims=True))
 
 
 def batch_shape(x: jax.Array, core_ndim: int) -> tuple[int, ...]:
@@ -51,12 +103,14 @@ def epsilon(dtype) -> float:
     return 1e-5 if jnp.finfo(dtype).bits <= 32 else 1e-10
 
 
-def safe_norm(v: jax.Array, axis: int = -1) -> jax.Array:
-    """Euclidean norm with a finite (zero) gradient at the zero vector (double ``where``)."""
-    n2 = jnp.sum(v * v, axis=axis)
+def safe_norm(v: jax.Array) -> jax.Array:
+    """Euclidean norm over the last axis, safe for any finite scale (see :func:`rescale`),
+    with a finite (zero) gradient at the zero vector (double ``where``)."""
+    v, s = rescale(v)
+    n2 = jnp.sum(v * v, axis=-1)
     positive = n2 > 0
     n2_safe = jnp.where(positive, n2, jnp.ones_like(n2))
-    return jnp.where(positive, jnp.sqrt(n2_safe), jnp.zeros_like(n2))
+    return s[..., 0] * jnp.where(positive, jnp.sqrt(n2_safe), jnp.zeros_like(n2))
 
 
 def cross(a: jax.Array, b: jax.Array) -> jax.Array:
