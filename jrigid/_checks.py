@@ -30,7 +30,7 @@ def _shape_text(trailing: tuple[int, ...]) -> str:
     return "(" + ", ".join(["...", *(str(n) for n in trailing)]) + ")"
 
 
-def check_shape(x, name: str, *trailing: tuple[int, ...]) -> jax.Array:
+def check_shape(x, name: str, *trailing: tuple[int, ...], why: str = "") -> jax.Array:
     """Return ``x`` as an array if its trailing axes match one of ``trailing``.
 
     A static check (shapes are known while tracing), so it costs nothing under ``jit``.
@@ -39,6 +39,7 @@ def check_shape(x, name: str, *trailing: tuple[int, ...]) -> jax.Array:
         x: array-like.
         name: what ``x`` is, for the message (e.g. ``"q (a quaternion)"``).
         *trailing: accepted trailing shapes, e.g. ``(4,)`` or ``(2,), (3,)``.
+        why: appended to the expected shape, e.g. ``" to match T of shape (4, 4)"``.
 
     Returns:
         ``jnp.asarray(x)``.
@@ -52,7 +53,7 @@ def check_shape(x, name: str, *trailing: tuple[int, ...]) -> jax.Array:
         if x.ndim >= len(shape) and x.shape[x.ndim - len(shape) :] == tuple(shape):
             return x
     expected = " or ".join(_shape_text(tuple(s)) for s in trailing)
-    raise ValueError(f"{name} must have shape {expected}; got shape {x.shape}")
+    raise ValueError(f"{name} must have shape {expected}{why}; got shape {x.shape}")
 
 
 def is_traced(*trees) -> bool:

@@ -37,17 +37,17 @@ def as_float_all(*xs: ArrayLike) -> tuple[jax.Array, ...]:
 
 def quaternion_arg(q: ArrayLike, name: str = "q") -> jax.Array:
     """``q`` as a float array, after checking its trailing shape is ``(4,)`` (static)."""
-    return check_shape(as_float(q), f"{name} (a quaternion (w, x, y, z))", (4,))
+    return check_shape(as_float(q), name, (4,), why=", a quaternion (w, x, y, z)")
 
 
 def vector_arg(v: ArrayLike, name: str) -> jax.Array:
     """``v`` as a float array, after checking its trailing shape is ``(3,)`` (static)."""
-    return check_shape(as_float(v), f"{name} (a 3-vector)", (3,))
+    return check_shape(as_float(v), name, (3,))
 
 
 def matrix_arg(m: ArrayLike, name: str = "matrix") -> jax.Array:
     """``m`` as a float array, after checking its trailing shape is ``(3, 3)`` (static)."""
-    return check_shape(as_float(m), f"{name} (a 3x3 matrix)", (3, 3))
+    return check_shape(as_float(m), name, (3, 3))
 
 
 def rescale(x: jax.Array) -> tuple[jax.Array, jax.Array]:
