@@ -56,17 +56,20 @@ def rescale(x: jax.Array) -> tuple[jax.Array, jax.Array]:
     ``s (..., 1)`` is ``1`` (and ``x`` is returned unchanged, bit for bit) unless the
     largest ``|component|`` lies outside ``[sqrt(tiny)/eps, sqrt(max)/(2n)]``, where the
     sum of squares would overflow or lose precision; then ``s`` is that largest
-    component, so ``x / s`` has entries in ``[-1, 1]``. A zero or non-finite ``x`` keeps
-    ``s = 1``. ``s`` carries no gradient: functions of ``x`` that are homogeneous
-    (``normalize``, ``norm``, the conversions) then still get exact derivatives.
+    component, so ``x / s`` has entries in ``[-1, 1]``. A zero ``x`` keeps ``s = 1``. An
+    ``x`` with a NaN or infinite entry has no direction: ``x / s`` is all NaN there, so
+    every function built on it returns NaN for that element. ``s`` carries no gradient:
+    functions of ``x`` that are homogeneous (``normalize``, ``norm``, the conversions)
+    then still get exact derivatives.
     """
     info = jnp.finfo(x.dtype)
     lo = math.sqrt(float(info.tiny)) / float(info.eps)
     hi = math.sqrt(float(info.max)) / (2.0 * x.shape[-1])
     m = jnp.max(jnp.abs(x), axis=-1, keepdims=True)
-    keep = ((m >= lo) & (m <= hi)) | (m == 0) | ~jnp.isfinite(m)
+    finite = jnp.isfinite(m)
+    keep = ((m >= lo) & (m <= hi)) | (m == 0) | ~finite
     s = lax.stop_gradient(jnp.where(keep, jnp.ones_like(m), m))
-    return x / s, s
+    return jnp.where(finite, x / s, jnp.nan), s
 
 
 def unit(x: jax.Array) -> jax.Array:
@@ -105,12 +108,13 @@ def epsilon(dtype) -> float:
 
 def safe_norm(v: jax.Array) -> jax.Array:
     """Euclidean norm over the last axis, safe for any finite scale (see :func:`rescale`),
-    with a finite (zero) gradient at the zero vector (double ``where``)."""
+    with a finite (zero) gradient at the zero vector (double ``where``); NaN for a
+    vector with a NaN or infinite entry."""
     v, s = rescale(v)
     n2 = jnp.sum(v * v, axis=-1)
-    positive = n2 > 0
-    n2_safe = jnp.where(positive, n2, jnp.ones_like(n2))
-    return s[..., 0] * jnp.where(positive, jnp.sqrt(n2_safe), jnp.zeros_like(n2))
+    zero = n2 == 0
+    n2_safe = jnp.where(zero, jnp.ones_like(n2), n2)
+    return s[..., 0] * jnp.where(zero, jnp.zeros_like(n2), jnp.sqrt(n2_safe))
 
 
 def cross(a: jax.Array, b: jax.Array) -> jax.Array:

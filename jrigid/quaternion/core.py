@@ -125,7 +125,8 @@ def norm(q: ArrayLike) -> jax.Array:
         q: ``(..., 4)``.
 
     Returns:
-        ``(...)`` norms (exact for any finite scale: no overflow at ``|q| = 1e300``).
+        ``(...)`` norms (exact for any finite scale: no overflow at ``|q| = 1e300``;
+        NaN if ``q`` has a NaN or infinite entry).
     """
     return safe_norm(quaternion_arg(q))
 
@@ -274,8 +275,10 @@ def to_axis_angle(q: ArrayLike) -> tuple[jax.Array, jax.Array]:
     default = jnp.zeros_like(v).at[..., 0].set(1)
     axis = jnp.where(nonzero[..., None], v / n[..., None], default)
     angle = 2.0 * jnp.arctan2(jnp.where(nonzero, n, jnp.zeros_like(n)), w)
-    zero = ~nonzero & (w == 0)  # the zero quaternion: no rotation, NaN like normalize
-    return jnp.where(zero[..., None], jnp.nan, axis), jnp.where(zero, jnp.nan, angle)
+    # The zero quaternion is no rotation and a non-finite one (all NaN after rescale)
+    # has no direction: NaN, like normalize.
+    bad = (~nonzero & (w == 0)) | jnp.isnan(w)
+    return jnp.where(bad[..., None], jnp.nan, axis), jnp.where(bad, jnp.nan, angle)
 
 
 def from_rotvec(rotvec: ArrayLike) -> jax.Array:
