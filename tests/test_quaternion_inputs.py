@@ -4,6 +4,9 @@ References: scipy's ``Rotation`` (its canonical sign rule and ``as_rotvec``), nu
 analytic identities (scale invariance of the conversions).
 """
 
+import subprocess
+import sys
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -212,3 +215,17 @@ def test_zero_quaternion_gives_nan_from_every_conversion():
                 jq.inverse(z), *jq.to_axis_angle(z), jq.distance(z, jq.identity())):
         assert np.all(np.isnan(out))
     assert jq.norm(z) == 0.0
+
+
+def test_project_to_rotation_of_non_finite_input_is_nan_and_returns():
+    """LAPACK's SVD never returned on an infinite entry: the call hung."""
+    code = (
+        "import jax; jax.config.update('jax_enable_x64', True)\n"
+        "import numpy as np, jrigid.quaternion as jq\n"
+        "m = np.stack([np.eye(3), np.diag([np.inf, 1.0, 1.0]), np.full((3, 3), np.nan)])\n"
+        "out = np.asarray(jq.project_to_rotation(m))\n"
+        "assert np.array_equal(out[0], np.eye(3)) and np.isnan(out[1:]).all(), out\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0, done.stderr

@@ -18,6 +18,7 @@ are exact for any finite non-zero norm, ``1e-300`` and ``1e300`` included.
 
 from __future__ import annotations
 
+import operator
 from collections.abc import Sequence
 
 import jax
@@ -78,8 +79,17 @@ def identity(batch_shape: Sequence[int] = (), dtype=None) -> jax.Array:
 
     Returns:
         ``(*batch_shape, 4)`` array.
+
+    Raises:
+        ValueError: if ``batch_shape`` is not a sequence of non-negative integers.
     """
-    shape = tuple(batch_shape) + (4,)
+    try:
+        shape = tuple(operator.index(n) for n in batch_shape)
+    except TypeError:
+        shape = (-1,)
+    if any(n < 0 for n in shape):
+        raise ValueError(f"batch_shape must be a sequence of integers >= 0, got {batch_shape!r}")
+    shape = shape + (4,)
     return jnp.zeros(shape, dtype=dtype).at[..., 0].set(1)
 
 

@@ -197,9 +197,13 @@ def project_to_rotation(matrix: ArrayLike) -> jax.Array:
         matrix: ``(..., 3, 3)`` any real matrix.
 
     Returns:
-        ``(..., 3, 3)`` rotation matrix.
+        ``(..., 3, 3)`` rotation matrix; NaN for a matrix with a NaN or infinite entry
+        (which is kept away from the SVD: LAPACK's SVD does not return on infinite input).
     """
-    return _special_polar(matrix_arg(matrix))
+    m = matrix_arg(matrix)
+    finite = jnp.all(jnp.isfinite(m), axis=(-2, -1))[..., None, None]
+    eye = jnp.broadcast_to(jnp.eye(3, dtype=m.dtype), m.shape)
+    return jnp.where(finite, _special_polar(jnp.where(finite, m, eye)), jnp.nan)
 
 
 def rodrigues_matrix(axis: ArrayLike, angle: ArrayLike) -> jax.Array:
