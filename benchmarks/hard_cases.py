@@ -30,9 +30,9 @@ scaling, see :func:`diagonal_map`) of a physical body:
 
 References (never a method under test): torque-free cases use ``jrigid.exact`` (closed
 form), cross-checked with scipy DOP853 at rtol 1e-13 up to 2000 time units; the tops use
-scipy DOP853 at rtol 1e-13 on the (q, ω) equations, cross-checked with DOP853 on the
-Lagrange equations in Euler angles (a different set of equations) and with the analytic
-``cos θ(t)`` of :func:`top_analytic`. Periods (:func:`free_period`) and the top's
+``jrigid.lagrange_top`` (the heavy symmetric top in closed form), cross-checked with scipy
+DOP853 at rtol 1e-13 on the (q, ω) equations and with the analytic ``cos θ(t)`` of
+:func:`top_analytic`. Periods (:func:`free_period`) and the top's
 nutation (:func:`top_analytic`) come from the classical formulae with scipy's elliptic
 functions, independent of ``jrigid.special``.
 
@@ -56,7 +56,6 @@ import numpy as np
 from scipy import special as sps
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
-from scipy.spatial.transform import Rotation
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 
@@ -77,6 +76,7 @@ __all__ = [
     "scene",
     "time_scale",
     "top_analytic",
+    "top_final",
     "top_u",
     "nutation_from_samples",
     "turning_points",
@@ -390,42 +390,6 @@ def _dop853(rhs, y0, t1, t_eval=None, rtol=1e-13):
                          t_eval=t_eval)
 
 
-def top_euler_rhs(case: Case):
-    """Lagrange equations of the symmetric top in ZXZ angles, ``y = (φ, θ, ψ, θ̇)``.
-
-    ``p_ψ = I3 ω3`` and ``p_φ = I1' φ̇ sin²θ + p_ψ cos θ`` are constants;
-    ``φ̇ = (p_φ − p_ψ cos θ)/(I1' sin²θ)``, ``ψ̇ = p_ψ/I3 − φ̇ cos θ``,
-    ``I1' θ̈ = I1' φ̇² sin θ cos θ − p_ψ φ̇ sin θ + M g l sin θ``.
-    """
-    i1p = case.moments[0] + case.mass * case.height**2
-    i3 = case.moments[2]
-    p_psi = i3 * case.top_spin
-    p_phi = p_psi * math.cos(case.tilt)  # released with φ̇ = 0
-    mgl = case.mass * case.g * case.height
-
-    def rhs(t, y):
-        _, th, _, dth = y
-        s, c = math.sin(th), math.cos(th)
-        dphi = (p_phi - p_psi * c) / (i1p * s * s)
-        return np.array([
-            dphi, dth, p_psi / i3 - dphi * c,
-            (i1p * dphi * dphi * s * c - p_psi * dphi * s + mgl * s) / i1p,
-        ])
-
-    return rhs, np.array([0.0, case.tilt, 0.0, 0.0])
-
-
-def top_euler_state(case: Case, y) -> tuple[np.ndarray, np.ndarray]:
-    """``(q, ω_body)`` from a :func:`top_euler_rhs` state (scipy ``Rotation``)."""
-    rhs, _ = top_euler_rhs(case)
-    phi, th, psi, dth = y
-    dphi, _, dpsi, _ = rhs(0.0, y)
-    q = Rotation.from_euler("ZXZ", [phi, th, psi]).as_quat(scalar_first=True)
-    st, ct, sp, cp = math.sin(th), math.cos(th), math.sin(psi), math.cos(psi)
-    omega = np.array([dphi * st * sp + dth * cp, dphi * st * cp - dth * sp, dphi * ct + dpsi])
-    return q, omega
-
-
 def exact_final(case: Case, t1: float) -> tuple[np.ndarray, np.ndarray]:
     """``jrigid.exact`` at ``t1`` in float64: ``(q (4,), ω (3,))``."""
     from jrigid import exact
@@ -463,24 +427,34 @@ def reference(case: Case, size: str = "full") -> dict:
             out["check"] = f"scipy DOP853 at rtol 1e-13 agrees to {floor:.2g}"
         out["seconds"] = time.perf_counter() - start
         return out
+    q, w = top_final(case, t1)
     with jax.enable_x64(True):
         y0 = prob.y0()
     dop = _dop853(prob.numpy_rhs(), y0, t1)
-    q, w = dop.y[:4, -1] / np.linalg.norm(dop.y[:4, -1]), dop.y[4:, -1]
-    if case.tilt < 0.05:  # the Euler-angle equations are singular near θ = 0
-        return {"q": q, "omega": w, "t1": t1,
-                "source": "scipy DOP853 rtol 1e-13 on the (q, ω) equations", "floor": None,
-                "check": "none (Euler-angle equations singular near θ = 0)",
-                "seconds": time.perf_counter() - start}
-    rhs, e0 = top_euler_rhs(case)
-    lag = _dop853(rhs, e0, t1)
-    q2, w2 = top_euler_state(case, lag.y[:, -1])
-    floor = max(harness.omega_error(w2, w), harness.quaternion_error(q2, q))
+    floor = max(harness.omega_error(dop.y[4:, -1], w),
+                harness.quaternion_error(dop.y[:4, -1] / np.linalg.norm(dop.y[:4, -1]), q))
     return {"q": q, "omega": w, "t1": t1,
-            "source": "scipy DOP853 rtol 1e-13 on the (q, ω) equations",
+            "source": "jrigid.lagrange_top (closed form), float64",
             "floor": floor,
-            "check": f"DOP853 on the Euler-angle Lagrange equations agrees to {floor:.2g}",
+            "check": f"scipy DOP853 at rtol 1e-13 on the (q, ω) equations agrees to {floor:.2g}",
             "seconds": time.perf_counter() - start}
+
+
+def top_final(case: Case, t1: float) -> tuple[np.ndarray, np.ndarray]:
+    """``jrigid.lagrange_top`` (the heavy symmetric top in closed form) at ``t1`` in float64."""
+    from jrigid import lagrange_top
+
+    with jax.enable_x64(True):
+        prob = problem(case, "small")
+        state = prob.state()
+        scene = prob.scene()
+        g = lagrange_top.scene_gravity(scene)
+        q, w = lagrange_top.solve(
+            jnp.asarray(scene.body.moments, jnp.float64), jnp.asarray(scene.body.mass),
+            jnp.asarray(scene.body.com, jnp.float64), g, jnp.asarray(state.q, jnp.float64),
+            jnp.asarray(state.omega, jnp.float64), jnp.asarray([0.0, t1], jnp.float64),
+        )
+        return np.asarray(q[-1], float), np.asarray(w[-1], float)
 
 
 # ------------------------------------------------------------------ measurements

@@ -162,6 +162,26 @@ class RigidBody(eqx.Module):
         """
         return quat.multiply(q, quat.conjugate(self.frame))
 
+    def problems(self) -> list[tuple[jax.Array, str]]:
+        """``[(bad, message), ...]``: the body's value checks as traced ``()`` flags.
+
+        The inertia conditions of :func:`jrigid.inertia.validate` (finite, positive,
+        triangle inequality unless ``allow_nonphysical``), a finite positive mass and a
+        finite centre of mass. Used by the solvers to check inputs inside ``jit``/``vmap``.
+        """
+        conditions = inertia.conditions(
+            self.moments, kind="moments", allow_nonphysical=self.allow_nonphysical
+        )
+        out = [(jnp.any(bad), f"inertia is not valid: {name}") for name, bad, _, _ in conditions]
+        out.append(
+            (
+                ~jnp.all(jnp.isfinite(self.mass) & (self.mass > 0)),
+                "RigidBody: mass must be finite and positive",
+            )
+        )
+        out.append((~jnp.all(jnp.isfinite(self.com)), "RigidBody: com must be finite"))
+        return out
+
     def check(self) -> RigidBody:
         """Jit-safe validation (``equinox.error_if``); returns the body unchanged."""
         moments = inertia.check(

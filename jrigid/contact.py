@@ -48,6 +48,7 @@ checks and are safe under ``jit``/``vmap``/``grad``.
 
 from __future__ import annotations
 
+import math
 from typing import Any, ClassVar, NamedTuple
 
 import diffrax
@@ -58,13 +59,21 @@ import numpy as np
 import optimistix as optx
 from jax.typing import ArrayLike
 
+from jrigid import linalg
 from jrigid import quaternion as quat
 from jrigid._checks import as_float, is_traced
 from jrigid.formulations import get_formulation
-from jrigid.integrate import ProjectedSolver, prepare, validate
-from jrigid.scene import AbstractLoad, Scene, _solve3
+from jrigid.scene import AbstractLoad, Scene
+from jrigid.solve import (
+    DEFAULT_SOLVER,
+    ProjectedSolver,
+    classify,
+    controller,
+    prepare,
+    validate,
+)
 from jrigid.state import State
-from jrigid.trajectory import Trajectory
+from jrigid.trajectory import Result, Trajectory
 
 __all__ = [
     "BounceRun",
@@ -205,7 +214,7 @@ def contact_impulse(mass, moments, q, v, omega, r, normal, restitution, friction
     u = v + jnp.cross(quat.rotate(q, omega), r)
     un = jnp.dot(u, n)
     ut = u - un * n
-    stick = _solve3(K, -(1.0 + restitution) * un * n - ut)
+    stick = linalg.solve3(K, -(1.0 + restitution) * un * n - ut)
     pn = jnp.dot(stick, n)
     pt = stick - pn * n
     pt2 = jnp.dot(pt, pt)
@@ -298,26 +307,32 @@ def _lowest(scene, formulation, y):
 def _segment(scene, formulation, solver, y0, t0, t1, rtol, atol, dt0, depth, max_steps):
     """Integrate from ``t0`` until ``t1`` or the next contact: the lowest point crossing
     ``depth`` below the floor downwards (``depth > 0`` keeps the start, on the floor,
-    strictly above the event level)."""
+    strictly above the event level).
+
+    Returns ``(t_end, y_end, code, interpolation, num_steps)`` with ``code`` 0 (reached
+    ``t1``), 1 (contact) or a :class:`~jrigid.trajectory.Result` failure code + 10.
+    """
     eps = jnp.finfo(t0.dtype).eps
-    # bisection stops when the bracket is below atol + rtol |t| and |height| < atol
-    atol = jnp.maximum(0.5 * depth, 1000 * eps)
+    # the bisection stops when the bracket is below root_atol + rtol |t| and
+    # |height| < root_atol
+    root_atol = jnp.maximum(0.5 * depth, 1000 * eps)
     event = diffrax.Event(
         lambda t, y, args, **kw: _lowest(args, formulation, y) + depth,
-        optx.Bisection(rtol=100 * eps, atol=atol, flip="detect"),
+        optx.Bisection(rtol=100 * eps, atol=root_atol, flip="detect"),
         direction=False,
     )
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(formulation.vector_field), solver, t0, t1, dt0, y0, args=scene,
         saveat=diffrax.SaveAt(t1=True, dense=True),
-        stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
+        stepsize_controller=controller(jnp.stack([t0, t1]), rtol, atol),
         event=event, max_steps=max_steps, throw=False,
     )  # fmt: skip
     R = diffrax.RESULTS
     # a bisection out of iterations still brackets the contact time to a few ulps of t
     hit = (sol.result == R.event_occurred) | (sol.result == R.nonlinear_max_steps_reached)
-    code = jnp.where(sol.result == R.successful, 0, jnp.where(hit, 1, 2))
     y1 = jax.tree_util.tree_map(lambda a: a[-1], sol.ys)
+    failure = classify(sol.result, formulation, scene, y1, sol.ts[-1], sol.ys, t1 - t0)
+    code = jnp.where(sol.result == R.successful, 0, jnp.where(hit, 1, 10 + failure))
     return sol.ts[-1], y1, code, sol.interpolation, sol.stats["num_steps"]
 
 
@@ -443,8 +458,8 @@ def simulate_bounces(
             contact point must start above the floor.
         ts: ``(T,)`` increasing output times.
         formulation: as :func:`jrigid.simulate` (a quaternion formulation).
-        solver: diffrax solver, default ``Tsit5``, wrapped in
-            :class:`~jrigid.integrate.ProjectedSolver`.
+        solver: diffrax solver, default :data:`jrigid.solve.DEFAULT_SOLVER`, wrapped in
+            :class:`~jrigid.solve.ProjectedSolver`.
         rtol, atol: step-size tolerances (defaults as :func:`jrigid.simulate`).
         max_bounces: stop after this many contacts (status ``"max_bounces"``).
         min_gap, rapid_bounces: resting criterion: ``rapid_bounces`` consecutive contacts
@@ -458,7 +473,9 @@ def simulate_bounces(
         max_steps: step budget of each segment.
 
     Returns:
-        :class:`BounceRun`.
+        :class:`BounceRun`; ``trajectory.result`` is ``Result.success`` for
+        ``"t_end"`` and ``"resting"``, ``Result.max_steps`` for ``"max_bounces"`` and the
+        segment's failure code (e.g. ``nonfinite``) for ``"failed"``.
 
     Raises:
         ValueError: a scene without a floor or free flight, a start below the floor,
@@ -470,14 +487,17 @@ def simulate_bounces(
     floor = _floor(scene)
     dtype = jnp.result_type(float)
     state, ts, rtol, atol = prepare(scene, initial_state, ts, rtol, atol, dtype)
-    if not (isinstance(max_bounces, int) and max_bounces >= 0):
-        raise ValueError(f"max_bounces must be an int >= 0, got {max_bounces!r}")
+    _check_count(max_bounces, "max_bounces", 0)
+    _check_count(rapid_bounces, "rapid_bounces", 1)
+    _check_positive(min_gap, "min_gap")
+    if contact_tol is not None:
+        _check_positive(contact_tol, "contact_tol")
     q0 = quat.normalize(state.q)
     if float(jnp.min(point_positions(q0, state.x, floor.points)[:, 2])) < float(floor.height):
         raise ValueError("the body starts below the floor: raise initial_state.x")
     formulation.check_scene(scene)
     validate(formulation, scene, state, ts, rtol, atol)
-    solver = ProjectedSolver(diffrax.Tsit5() if solver is None else solver, formulation)
+    solver = ProjectedSolver(DEFAULT_SOLVER() if solver is None else solver, formulation)
     y = formulation.from_state(scene, State(q0, state.qdot, state.x, state.v))
     t, t1 = ts[0], ts[-1]
     dt0 = jnp.asarray(min_gap / 4, dtype)
@@ -487,6 +507,7 @@ def simulate_bounces(
     ts_np = np.asarray(ts)
     ys = jax.tree_util.tree_map(lambda a: np.full((len(ts_np),) + a.shape, np.nan, a.dtype), y)
     rows, status, rapid, last, steps, dropped, grazes = [], "t_end", 0, -np.inf, 0, 0.0, 0
+    failure = Result.solver_failure
     while True:
         t_hit, y_hit, code, interp, n_steps = _segment(
             scene, formulation, solver, y, t, t1, rtol, atol, dt0, tol, max_steps
@@ -502,8 +523,8 @@ def simulate_bounces(
             seg = jax.device_get(_sample(interp, jnp.asarray(tt), t, t_hit))
             ys = _put(ys, idx, seg)
         code = int(code)
-        if code == 2:
-            status = "failed"
+        if code >= 10:
+            status, failure = "failed", Result(code - 10)
             break
         if code == 0:
             break
@@ -511,7 +532,7 @@ def simulate_bounces(
         if int(res["count"]) == 0:  # grazing: the lowest point was not approaching
             grazes += 1
             if grazes > 10:
-                status = "failed"
+                status, failure = "failed", Result.solver_failure
                 break
             y, t = res["y"], t_hit
             continue
@@ -541,10 +562,27 @@ def simulate_bounces(
     ys = jax.tree_util.tree_map(jnp.asarray, ys)
     traj = Trajectory.build(
         scene, formulation, ts, ys, stats=stats,
-        result=jnp.asarray(0 if status in ("t_end", "resting") else 1, jnp.int32),
+        result=jnp.asarray(
+            {"t_end": Result.success, "resting": Result.success,
+             "max_bounces": Result.max_steps}.get(status, failure), jnp.int32),
         t_stop=jnp.asarray(t_stop, dtype),
     )  # fmt: skip
     return BounceRun(traj, _stack(rows), status, t_stop, dropped, steps)
+
+
+def _check_count(value, name: str, least: int) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
+        raise ValueError(f"{name} must be an int >= {least}, got {value!r}")
+
+
+def _check_positive(value, name: str) -> None:
+    try:
+        ok = isinstance(value, (int, float, np.number)) and not isinstance(value, bool) \
+            and math.isfinite(float(value)) and float(value) > 0
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise ValueError(f"{name} must be a finite number > 0, got {value!r}")
 
 
 def _put(ys, idx, new):

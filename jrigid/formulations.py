@@ -38,6 +38,7 @@ rejected).
 
 from __future__ import annotations
 
+import functools
 from typing import ClassVar
 
 import diffrax
@@ -45,7 +46,9 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from jrigid import linalg
 from jrigid import quaternion as quat
+from jrigid.invariants import Invariants, restore
 from jrigid.scene import Scene
 from jrigid.state import Kinematics, State, omega_from_rate
 
@@ -97,8 +100,13 @@ class AbstractFormulation(eqx.Module):
         """``dy/dt`` (the diffrax vector field with ``args = scene``)."""
         raise NotImplementedError
 
-    def project(self, y, scene: Scene):
-        """Nearest point of the constraint manifold (identity if there is none)."""
+    def project(self, y, scene: Scene, invariants: Invariants | None = None):
+        """Nearest point of the constraint manifold (identity if there is none).
+
+        With ``invariants`` (:class:`~jrigid.invariants.Invariants`), formulations that
+        carry ``(q, ω)`` also restore the scene's conserved quantities
+        (:func:`jrigid.invariants.project`).
+        """
         return y
 
     def raw_quaternion(self, y) -> jax.Array | None:
@@ -138,30 +146,30 @@ class QuaternionAcceleration(AbstractFormulation):
 
     def vector_field(self, t, y, scene):
         q, qd = y.q, y.qdot
-        n2 = jnp.dot(q, q)
+        n2 = linalg.dot(q, q)
         omega = 2.0 * quat.multiply(quat.conjugate(q), qd)[1:] / n2
         kin = Kinematics(q / jnp.sqrt(n2), omega, y.x, y.v)
         force, torque = scene.wrench(t, kin)
         omega_dot = scene.omega_dot(omega, torque)
-        qdd = 0.5 * quat.multiply(q, _pure(omega_dot)) - jnp.dot(qd, qd) * q
+        qdd = 0.5 * quat.multiply(q, _pure(omega_dot)) - linalg.dot(qd, qd) * q
         if self.stabilization:
-            k = self.stabilization * jnp.sqrt(jnp.dot(omega, omega))
-            c = jnp.dot(q, qd)
+            k = self.stabilization * jnp.sqrt(linalg.dot(omega, omega))
+            c = linalg.dot(q, qd)
             e = n2 - 1.0
             qdd = qdd - ((2.0 * k * c + 0.5 * k * k * e) / n2) * q
         xd, vd = _translation_rates(scene, y.v, force)
         return State(qd, qdd, xd, vd)
 
-    def project(self, y, scene):
+    def project(self, y, scene, invariants=None):
         q = quat.normalize(y.q)
-        qdot = quat.derivative(q, omega_from_rate(y.q, y.qdot))
-        return State(q, qdot, y.x, y.v)
+        q, omega = restore(scene, invariants, q, omega_from_rate(y.q, y.qdot))
+        return State(q, quat.derivative(q, omega), y.x, y.v)
 
     def raw_quaternion(self, y):
         return y.q
 
     def tangent_error(self, y):
-        return jnp.sum(y.q * y.qdot, axis=-1)
+        return linalg.dot(y.q, y.qdot)
 
 
 class QuaternionOmegaState(eqx.Module):
@@ -192,8 +200,9 @@ class QuaternionOmega(AbstractFormulation):
         xd, vd = _translation_rates(scene, y.v, force)
         return QuaternionOmegaState(qd, scene.omega_dot(y.omega, torque), xd, vd)
 
-    def project(self, y, scene):
-        return QuaternionOmegaState(quat.normalize(y.q), y.omega, y.x, y.v)
+    def project(self, y, scene, invariants=None):
+        q, omega = restore(scene, invariants, quat.normalize(y.q), y.omega)
+        return QuaternionOmegaState(q, omega, y.x, y.v)
 
     def raw_quaternion(self, y):
         return y.q
@@ -307,12 +316,17 @@ FORMULATIONS = {
 }
 
 
+@functools.cache
+def _default_instance(name: str) -> AbstractFormulation:
+    return FORMULATIONS[name]()
+
+
 def get_formulation(formulation: str | AbstractFormulation) -> AbstractFormulation:
     """A formulation from its name (see :data:`FORMULATIONS`) or the object itself."""
     if isinstance(formulation, AbstractFormulation):
         return formulation
     try:
-        return FORMULATIONS[formulation]()
+        return _default_instance(formulation)
     except (KeyError, TypeError):
         raise ValueError(
             f"unknown formulation {formulation!r}; choose one of {sorted(FORMULATIONS)} "

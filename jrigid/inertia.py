@@ -29,6 +29,7 @@ from jrigid._checks import as_float, check_shape, fail_if, is_traced
 __all__ = [
     "box",
     "check",
+    "conditions",
     "disk",
     "ellipsoid",
     "from_point_masses",
@@ -432,6 +433,21 @@ def _positive_definite(sym: jax.Array) -> jax.Array:
     scaled = sym * r[..., :, None] * r[..., None, :]
     ev = jnp.linalg.eigvalsh(scaled)
     return positive & (ev[..., 0] > 3 * eps * ev[..., -1])
+
+
+def conditions(inertia, *, allow_nonphysical: bool = False, kind: str | None = None, rtol=None):
+    """The checks of :func:`validate` as traced flags: ``[(name, bad, label, values), ...]``.
+
+    Args:
+        inertia: moments ``(..., 3)`` or tensor ``(..., 3, 3)``.
+        allow_nonphysical, kind, rtol: as :func:`validate`.
+
+    Returns:
+        One entry per condition, in report order: its name, ``bad (...)`` (batch
+        shape), and the label and values a message would quote.
+    """
+    inertia = as_float(inertia)
+    return _conditions(inertia, _kind(inertia, kind), allow_nonphysical, rtol)
 
 
 def check(inertia, *, allow_nonphysical: bool = False, kind: str | None = None, rtol=None):

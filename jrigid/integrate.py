@@ -1,53 +1,44 @@
 """Adaptive integration of a scene with diffrax: :func:`simulate`.
 
-One entry point, :func:`simulate`, over :func:`diffrax.diffeqsolve` with a
-:class:`diffrax.PIDController`. The whole solve is compiled once per scene structure,
-formulation, solver, ``max_steps`` and number of output times; tolerances, ``dt0``,
-the output times and every array inside the scene and the initial state are traced
-inputs, so changing them does not recompile.
+One entry point, :func:`simulate`, over :func:`diffrax.diffeqsolve`. The default is
+Euler's equations in quaternion-acceleration form (17.50) with the fused Tsitouras 5(4)
+pair (:class:`jrigid.solvers.FusedTsit5`) under a PID controller, and after every step
+the state is projected back onto ``|q| = 1``, ``q·q̇ = 0`` and onto the invariants the
+scene conserves (energy and ``|L|`` for a torque-free body; energy, the vertical and —
+for a symmetric top — the axial angular momentum on a pivot under gravity): see
+:mod:`jrigid.invariants`. The projection is what makes the second-order form as accurate
+per tolerance as the first-order ``(q, ω)`` form; the measurements are in the README
+("Speed and accuracy").
 
-Constraint handling for quaternion formulations: :class:`ProjectedSolver` wraps any
-diffrax solver and maps each step's result back onto ``|q| = 1`` (and ``q·q̇ = 0``).
-It is on by default (``project=True``): ``benchmarks/constraint_drift.py`` compares it
-with the stabilising term of :class:`~jrigid.formulations.QuaternionAcceleration`
-over 10⁴ rotation periods of an asymmetric body (Tsit5). Without either remedy
-``|q| − 1`` grows to about the tolerance (1.1e-6 at rtol 1e-6, 2.6e-10 at rtol 1e-9);
-projection keeps it 3–5× lower at the output times (which are interpolated, hence not
-exactly on the constraint) and leaves the energy and ``|L|`` errors unchanged. The
-stabilising term bounds the constraints as well, but multiplies the energy error by
-1.5–60 depending on gain and tolerance, so projection is the default.
+The whole solve — input checks included — is one compiled program per scene structure,
+formulation, solver, ``max_steps`` and number of output times; tolerances, ``dt0``, the
+output times and every array inside the scene and the initial state are traced inputs,
+so changing them does not recompile.
 
-Input errors raise ``ValueError`` before anything is compiled (concrete inputs) or,
-inside ``jit``/``vmap``/``grad``, come from ``equinox.error_if`` at run time with the
-same message. Integration failures are reported by :class:`Result` code:
+Input errors: a wrong type or shape raises ``ValueError`` before anything is compiled.
+Bad values (a zero quaternion, a non-physical inertia, NaN state, impossible
+tolerances) are checked inside the compiled program: with ``throw=True`` they raise
+``ValueError`` naming the problem (inside ``jit``/``vmap``: an ``equinox`` runtime error
+with the same text); with ``throw=False`` the member gets
+:attr:`~jrigid.trajectory.Result.invalid_input` and NaN outputs, and under ``vmap`` the
+other members are computed as if it were not there. Integration failures are reported by
+:class:`~jrigid.trajectory.Result` code: :class:`~jrigid.trajectory.SimulationError`
+(cause, time reached, step counts, remedy) with concrete values and ``throw=True``, an
+``equinox`` runtime error inside transformations, or the code in ``Trajectory.result``
+with ``throw=False`` (outputs after ``t_stop`` are NaN). equinox's
+``EQX_ON_ERROR`` environment variable chooses what a runtime error does (``raise``,
+the default; ``breakpoint``; ``nan``).
 
-- with concrete values and ``throw=True``, :class:`SimulationError` names the cause,
-  the time reached, the step counts and a remedy;
-- inside a transformation with ``throw=True``, an ``equinox`` runtime error carries
-  the cause and remedy (under ``vmap``: if any member fails);
-- with ``throw=False``, nothing is raised: ``Trajectory.result`` holds the code (one
-  per member under ``vmap``), ``Trajectory.t_stop`` the time reached, and every output
-  after ``t_stop`` is ``NaN``.
-
-Timing: the Python-side checks cost about a millisecond per call; for benchmarks wrap
-the call, ``fast = equinox.filter_jit(simulate)``, which leaves ~0.2 ms of dispatch.
-Step counts are in ``Trajectory.stats``.
-
-Adjoints: ``RecursiveCheckpointAdjoint`` (default, reverse mode) and
-``diffrax.ForwardMode()`` (for ``jax.jacfwd``) work; ``BacksolveAdjoint`` does not.
-
-``solver="exact"`` skips the integration for a torque-free scene and evaluates the
-closed-form motion of :mod:`jrigid.exact` at ``ts`` (plus the ballistic parabola of the
-centre of mass under uniform gravity in free flight). The closed-form ``q`` and ``ω`` are
-converted to the formulation's variables with ``formulation.from_state`` and the
-:class:`~jrigid.trajectory.Trajectory` is built as for the numerical path; ``rtol``,
-``atol``, ``max_steps``, ``dt0``, ``adjoint`` and ``project`` are ignored, the step
-counts are zero. It works under ``jit``, ``vmap`` and ``grad``.
+Differentiation: reverse mode (``jax.grad``) through diffrax's
+``RecursiveCheckpointAdjoint`` (default); forward mode (``jax.jvp``, ``jax.jacfwd``) needs
+``adjoint=diffrax.ForwardMode()``, which :func:`simulate` picks itself when its inputs
+are being forward-differentiated (``jax.jacfwd(f)``, ``jax.jit(jax.jacfwd(f))``). It
+cannot see a forward derivative taken *outside* a ``jit`` it runs in,
+``jax.jacfwd(jax.jit(f))``: JAX then fails with "can't apply forward-mode autodiff (jvp)
+to a custom_vjp function"; pass ``adjoint=diffrax.ForwardMode()`` there.
 """
 
 from __future__ import annotations
-
-import enum
 
 import diffrax
 import equinox as eqx
@@ -55,302 +46,97 @@ import jax
 import jax.numpy as jnp
 from jax.typing import ArrayLike
 
-from jrigid import exact
-from jrigid import quaternion as quat
-from jrigid._checks import is_traced
+from jrigid import closed_form
 from jrigid.formulations import AbstractFormulation, get_formulation
-from jrigid.scene import FreeFlight, FreeRotation, Gravity, Scene
+from jrigid.invariants import Invariants
+from jrigid.scene import Scene
+from jrigid.solve import (
+    DEFAULT_SOLVER,
+    ProjectedSolver,
+    controller,
+    finish,
+    input_checks,
+    normalised,
+    prepare,
+    raise_on_failure,
+    screen,
+    solver_options,
+)
 from jrigid.state import State
-from jrigid.trajectory import Trajectory
+from jrigid.trajectory import Result, SimulationError, Trajectory
 
-__all__ = [
-    "ExactMotion",
-    "ProjectedSolver",
-    "Result",
-    "SimulationError",
-    "check_exact_scene",
-    "simulate",
-]
+__all__ = ["DEFAULT_SOLVER", "Result", "SimulationError", "simulate"]
 
-
-class Result(enum.IntEnum):
-    """Outcome codes in ``Trajectory.result`` (an int32 array, one per ``vmap`` member).
-
-    - ``success`` (0): reached ``ts[-1]``;
-    - ``max_steps`` (1): the step budget ran out;
-    - ``step_size_collapse`` (2): the step size fell below ``4 eps |t|`` with a finite
-      vector field (a singular or very stiff solution);
-    - ``nonfinite`` (3): NaN/inf in the vector field or state (e.g. a NaN torque);
-    - ``gimbal_lock`` (4): the Euler-angle formulation reached ``sin θ ≈ 0``;
-    - ``solver_failure`` (5): any other diffrax failure (e.g. an implicit solver's
-      root find).
-    """
-
-    success = 0
-    max_steps = 1
-    step_size_collapse = 2
-    nonfinite = 3
-    gimbal_lock = 4
-    solver_failure = 5
+_FORWARD_MODE_HINT = (
+    "forward-mode differentiation (jax.jvp/jacfwd) of jrigid.simulate needs "
+    "adjoint=diffrax.ForwardMode(); the default RecursiveCheckpointAdjoint is for "
+    "reverse mode (jax.grad)"
+)
 
 
-_CAUSE = {
-    Result.max_steps: (
-        "max_steps={max_steps} exhausted before reaching the final time",
-        "raise max_steps, loosen rtol/atol, or shorten the time span",
-    ),
-    Result.step_size_collapse: (
-        "the step size collapsed (below 4 machine epsilons of t): the solution is "
-        "singular or too stiff there",
-        "check the torque and parameters for a singularity, or try an implicit solver "
-        "such as diffrax.Kvaerno5()",
-    ),
-    Result.nonfinite: (
-        "the vector field or state became non-finite (NaN or inf)",
-        "check the scene parameters and torque function for NaN/inf (e.g. division by "
-        "zero, a NaN parameter)",
-    ),
-    Result.gimbal_lock: (
-        "Euler-angle gimbal lock: |sin θ| fell below min_sin_theta, where the "
-        "Euler-angle rates (eq. 17.36) are singular",
-        "use formulation='quaternion_acceleration' (or 'quaternion_omega')",
-    ),
-    Result.solver_failure: (
-        "the solver reported a failure (e.g. an implicit solver's root find did not "
-        "converge)",
-        "loosen rtol/atol or change the solver",
-    ),
-}
+def _forward_differentiated(tree) -> bool:
+    """Whether a leaf is being forward-differentiated here (a JVP tracer, possibly batched)."""
+    from jax.interpreters import ad
+
+    for leaf in jax.tree_util.tree_leaves(tree):
+        x = leaf
+        while isinstance(x, jax.core.Tracer):
+            if isinstance(x, ad.JVPTracer):
+                return True
+            x = getattr(x, "val", None)
+    return False
 
 
-class SimulationError(RuntimeError):
-    """Raised by :func:`simulate` when an integration fails (cause and remedy in the text)."""
+def _project_mode(project) -> tuple[bool, bool]:
+    """``(manifold, invariants)`` from ``project`` (True, ``"manifold"`` or False)."""
+    if project is True or project == "invariants":
+        return True, True
+    if project == "manifold":
+        return True, False
+    if project is False or project is None:
+        return False, False
+    raise ValueError(f"project must be True, 'manifold' or False, got {project!r}")
 
 
-def _traced_message(code: Result, max_steps: int) -> str:
-    cause, remedy = _CAUSE[code]
-    return (
-        f"jrigid.simulate failed: {cause.format(max_steps=max_steps)}; {remedy}. "
-        "(Under vmap, pass throw=False for per-member Trajectory.result codes.)"
-    )
+_SAVE_Y = diffrax.SubSaveAt(t1=True).fn  # diffrax's default: save the state itself
 
 
-# --------------------------------------------------------------------------- projection
-
-
-class ProjectedSolver(diffrax.AbstractWrappedSolver):
-    """Wrap a diffrax solver; project every step's result onto the constraint manifold.
-
-    ``step`` calls the inner solver, then replaces ``y1`` by
-    ``formulation.project(y1, args)`` (for ``quaternion_acceleration``:
-    ``q ← q/|q|``, ``q̇ ← ½ q ⊗ (0, ω)`` with the step's ω, which keeps ω and hence
-    the kinetic energy; for ``quaternion_omega``: ``q ← q/|q|``). The error estimate is
-    the inner solver's, so step control is unchanged. A first-same-as-last solver reuses
-    its last stage, evaluated before projection, in the next step: the mismatch is of
-    the size of the projection (the local error), so the order is unaffected.
-
-    Attributes:
-        solver: the wrapped diffrax solver (any; ``isinstance`` checks see through it).
-        formulation: the formulation whose :meth:`project` is applied.
-    """
-
-    solver: diffrax.AbstractSolver
-    formulation: AbstractFormulation = eqx.field(static=True)
-
-    @property
-    def term_structure(self):
-        return self.solver.term_structure
-
-    @property
-    def interpolation_cls(self):  # pyright: ignore
-        return self.solver.interpolation_cls
-
-    @property
-    def term_compatible_contr_kwargs(self):
-        return self.solver.term_compatible_contr_kwargs
-
-    @property
-    def root_finder(self):
-        """The wrapped implicit solver's root finder (diffrax sets its tolerances)."""
-        return self.solver.root_finder
-
-    @property
-    def root_find_max_steps(self):
-        return self.solver.root_find_max_steps
-
-    @property
-    def scan_kind(self):
-        """The wrapped Runge–Kutta solver's ``scan_kind`` (diffrax sets it for forward mode)."""
-        return self.solver.scan_kind
-
-    def order(self, terms):
-        return self.solver.order(terms)
-
-    def strong_order(self, terms):
-        return self.solver.strong_order(terms)
-
-    def error_order(self, terms):
-        return self.solver.error_order(terms)
-
-    def init(self, terms, t0, t1, y0, args):
-        return self.solver.init(terms, t0, t1, y0, args)
-
-    def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
-        y1, y_error, dense_info, solver_state, result = self.solver.step(
-            terms, t0, t1, y0, args, solver_state, made_jump
-        )
-        y1 = self.formulation.project(y1, args)
-        if isinstance(dense_info, dict) and "y1" in dense_info:
-            dense_info = dict(dense_info, y1=y1)
-        return y1, y_error, dense_info, solver_state, result
-
-    def func(self, terms, t0, y0, args):
-        return self.solver.func(terms, t0, y0, args)
-
-
-# --------------------------------------------------------------------------- checks
-
-
-
-
-def _as(x, dtype, name: str, shape: tuple[int, ...]) -> jax.Array:
-    x = jnp.asarray(x, dtype=dtype)
-    if x.shape != shape:
-        raise ValueError(
-            f"{name} must have shape {shape}, got {x.shape} (use jax.vmap for batches)"
-        )
-    return x
-
-
-def prepare(scene: Scene, state: State, ts, rtol, atol, dtype):
-    """Static checks (types, shapes) and dtype conversion of the inputs; no value checks."""
-    if not isinstance(scene, Scene):
-        raise ValueError(f"scene must be a jrigid Scene, got {type(scene).__name__}")
-    if not isinstance(state, State):
-        raise ValueError(
-            f"initial_state must be a jrigid State (see jrigid.initial), got {type(state).__name__}"
-        )
-    if scene.translates and (state.x is None or state.v is None):
-        raise ValueError("a FreeFlight scene needs x and v in the initial state")
-    if not scene.translates and (state.x is not None or state.v is not None):
-        raise ValueError("x and v are only for FreeFlight scenes; this scene does not translate")
-    ts = jnp.asarray(ts, dtype=dtype)
-    if ts.ndim != 1 or ts.shape[0] < 2:
-        raise ValueError(f"ts must be a 1-D array of at least 2 times, got shape {ts.shape}")
-    wide = jnp.dtype(dtype).itemsize >= 8
-    rtol = _as(rtol if rtol is not None else (1e-8 if wide else 1e-5), dtype, "rtol", ())
-    atol = _as(atol if atol is not None else (1e-10 if wide else 1e-7), dtype, "atol", ())
-    state = State(
-        _as(state.q, dtype, "initial_state.q", (4,)),
-        _as(state.qdot, dtype, "initial_state.qdot", (4,)),
-        None if state.x is None else _as(state.x, dtype, "initial_state.x", (3,)),
-        None if state.v is None else _as(state.v, dtype, "initial_state.v", (3,)),
-    )
-    return state, ts, rtol, atol
-
-
-def problems(formulation, scene, state: State, ts, rtol, atol) -> list[tuple[jax.Array, str]]:
-    """``[(bad, message), ...]``: value checks of the inputs, in the order reported."""
-    eps = jnp.finfo(rtol.dtype).eps
-    name = jnp.dtype(rtol.dtype).name
-    finite = lambda a: jnp.all(jnp.isfinite(a))  # noqa: E731
-    n2 = jnp.sum(state.q * state.q)
-    out = [
-        (~jnp.isfinite(rtol) | (rtol <= 0), "rtol must be finite and > 0"),
-        (
-            rtol < 10 * eps,
-            f"rtol is below 10 machine epsilons ({10 * float(eps):.3g}) of {name}: the error "
-            "control cannot meet it; raise rtol (or enable float64)",
-        ),
-        (~jnp.isfinite(atol) | (atol < 0), "atol must be finite and >= 0"),
-        (~finite(ts), "ts has non-finite entries"),
-        (jnp.any(jnp.diff(ts) <= 0), "ts must be strictly increasing"),
-        (~finite(state.q), "initial_state.q has non-finite entries (NaN or inf)"),
-        (
-            n2 <= jnp.finfo(rtol.dtype).tiny,
-            "initial_state.q is the zero quaternion: it represents no rotation",
-        ),
-        (~finite(state.qdot), "initial_state.qdot is not finite (NaN or inf)"),
-    ]
-    if state.x is not None:
-        out.append((~(finite(state.x) & finite(state.v)), "initial_state.x or .v is not finite"))
-    domain = formulation.domain_error(scene, _normalised(state))
-    if domain is not None:
-        out.append(domain)
-    return out
-
-
-def _normalised(state: State) -> State:
-    n = jnp.sqrt(jnp.sum(state.q * state.q))
-    n = jnp.where(n > 0, n, 1.0)
-    return State(state.q / n, state.qdot / n, state.x, state.v)
-
-
-@eqx.filter_jit
-def _flags(formulation, scene, state, ts, rtol, atol):
-    return jnp.stack([bad for bad, _ in problems(formulation, scene, state, ts, rtol, atol)])
-
-
-def validate(formulation, scene, state, ts, rtol, atol) -> None:
-    """Raise ``ValueError`` for the first failed value check (concrete inputs only)."""
-    if is_traced((scene, state, ts, rtol, atol)):
+def _check_saveat(saveat) -> None:
+    if saveat is None:
         return
-    flags = jax.device_get(_flags(formulation, scene, state, ts, rtol, atol))
-    if flags.any():
-        first = int(flags.argmax())
-        message = problems(formulation, scene, state, ts, rtol, atol)[first][1]
-        if first < 3:  # the tolerance checks
-            message += f" (got rtol={float(rtol):.3g}, atol={float(atol):.3g})"
-        raise ValueError(message)
-
-
-def _guard(tree, checks: list[tuple[jax.Array, str]]):
-    """One ``equinox.branched_error_if`` for a list of ``(bad, message)`` checks."""
-    bad = jnp.stack([b for b, _ in checks])
-    return eqx.branched_error_if(tree, jnp.any(bad), jnp.argmax(bad), [m for _, m in checks])
-
-
-# --------------------------------------------------------------------------- solve
-
-
-def _all_finite(tree) -> jax.Array:
-    leaves = jax.tree_util.tree_leaves(tree)
-    return jnp.all(jnp.stack([jnp.all(jnp.isfinite(a)) for a in leaves]))
-
-
-def _classify(sol_result, formulation, scene, y_end, t_end, ys, span):
-    """Map diffrax's result to a :class:`Result` code.
-
-    A collapsed step size is blamed on non-finite values if the vector field is
-    non-finite at the last accepted state or at probes a little beyond it (rejected
-    trial steps are not kept, so their NaNs are not otherwise visible).
-    """
-    R = diffrax.RESULTS
-    f_end = formulation.vector_field(t_end, y_end, scene)
-    finite = _all_finite(y_end) & _all_finite(f_end)
-    for frac in (1e-12, 1e-8, 1e-4):
-        d = frac * span
-        y_probe = jax.tree_util.tree_map(lambda y, f, d=d: y + d * f, y_end, f_end)
-        finite = finite & _all_finite(formulation.vector_field(t_end + d, y_probe, scene))
-    code = jnp.where(sol_result == R.max_steps_reached, Result.max_steps, Result.solver_failure)
-    code = jnp.where(
-        sol_result == R.dt_min_reached,
-        jnp.where(finite, Result.step_size_collapse, Result.nonfinite),
-        code,
-    )
-    code = jnp.where(sol_result == R.event_occurred, Result.gimbal_lock, code)
-    ok = jnp.where(_all_finite(ys), Result.success, Result.nonfinite)
-    return jnp.where(sol_result == R.successful, ok, code).astype(jnp.int32)
+    if not isinstance(saveat, diffrax.SaveAt):
+        raise ValueError(f"saveat must be a diffrax.SaveAt, got {saveat!r}")
+    for sub in jax.tree_util.tree_leaves(saveat.subs, is_leaf=lambda s: isinstance(
+            s, diffrax.SubSaveAt)):
+        if sub.fn is not _SAVE_Y:
+            raise ValueError(
+                "saveat with a custom fn is not supported: jrigid derives every output from "
+                "the saved states (use the Trajectory's fields)"
+            )
+    if not (saveat.subs.t0 or saveat.subs.t1 or saveat.subs.ts is not None or saveat.subs.steps):
+        raise ValueError("saveat must save something (t0, t1, ts or steps), not only dense")
 
 
 @eqx.filter_jit
-def _solve(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoint, max_steps, project,
-           dense):
-    state, ts = _guard((state, ts), problems(formulation, scene, state, ts, rtol, atol))
-    scene = eqx.tree_at(lambda s: s.body, scene, scene.body.check())
-    y0 = formulation.from_state(scene, _normalised(state))
-    if project:
-        solver = ProjectedSolver(solver, formulation)
+def _solve(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoint, max_steps,
+           project, dense, saveat, stepsize_controller, event):
+    checks = input_checks(formulation, scene, state, ts, rtol, atol)
+    messages = tuple(m for _, m in checks)
+    invalid, cause, scene, state, ts, rtol, atol = screen(checks, scene, state, ts, rtol, atol)
+    state = normalised(state)
+    y0 = formulation.from_state(scene, state)
+    manifold, restore = project
+    save_fn = None
+    if manifold and formulation.carries_quaternion:
+        invariants = Invariants.of(scene, state.q, state.omega) if restore else None
+        solver = ProjectedSolver(solver, formulation, invariants)
+        save_fn = solver.save
+    user_saveat = saveat is not None
+    if saveat is None:
+        saveat = diffrax.SaveAt(ts=ts, t1=True, dense=dense)
+    if save_fn is not None:
+        saveat = eqx.tree_at(lambda s: s.subs.fn, saveat, save_fn)
+    own_event = formulation.event()
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(formulation.vector_field),
         solver,
@@ -359,147 +145,47 @@ def _solve(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoint, max_
         dt0,
         y0,
         args=scene,
-        saveat=diffrax.SaveAt(ts=ts, t1=True, dense=dense),
-        stepsize_controller=controller(ts, rtol, atol),
+        saveat=saveat,
+        stepsize_controller=(
+            controller(ts, rtol, atol) if stepsize_controller is None else stepsize_controller
+        ),
         adjoint=adjoint,
-        event=formulation.event(),
+        event=own_event if event is None else event,
         max_steps=max_steps,
         throw=False,
     )
-    return finish(scene, formulation, ts, sol.ts, sol.ys, sol.result, sol.stats,
-                  sol.interpolation)
+    interpolation = sol.interpolation if (dense or saveat.dense) else None
+    if user_saveat:
+        traj = _finish_saved(scene, formulation, ts, sol, interpolation, invalid, event)
+    else:
+        traj = finish(scene, formulation, ts, sol.ts, sol.ys, sol.result, sol.stats,
+                      interpolation, invalid, user_event=event is not None)
+    return traj, cause, messages
 
 
-def controller(ts, rtol, atol, norm=None) -> diffrax.PIDController:
-    """The PID step-size controller of every jrigid solve (``norm``: diffrax's default RMS).
+def _finish_saved(scene, formulation, ts, sol, interpolation, invalid, event):
+    """The trajectory of a user's ``SaveAt``: its times as diffrax filled them (``inf``
+    padding becomes NaN outputs)."""
+    from jrigid.solve import classify
 
-    ``dtmin`` is ``4 eps max(|t0|, |t1|)`` without forcing: a smaller step ends the solve
-    with ``dt_min_reached`` (:attr:`Result.step_size_collapse` or ``nonfinite``).
-    """
-    eps = jnp.finfo(ts.dtype).eps
-    extra = {} if norm is None else {"norm": norm}
-    return diffrax.PIDController(
-        rtol=rtol,
-        atol=atol,
-        dtmin=4 * eps * jnp.maximum(jnp.abs(ts[0]), jnp.abs(ts[-1])),
-        force_dtmin=False,
-        **extra,
-    )
-
-
-def finish(scene, formulation, ts, saved_ts, saved_ys, sol_result, sol_stats,
-           interpolation=None):
-    """One member's :class:`~jrigid.trajectory.Trajectory` from a diffrax solution.
-
-    Args:
-        saved_ts: ``(T + 1,)`` ``sol.ts`` of ``SaveAt(ts=ts, t1=True)``.
-        saved_ys: ``sol.ys``, leading axis ``T + 1``.
-        sol_result, sol_stats: ``sol.result`` and ``sol.stats`` (the step counts are kept).
-    """
-    stats = {k: sol_stats[k] for k in ("num_steps", "num_accepted_steps", "num_rejected_steps")}
-    # diffrax writes the final state into the first unfilled slot: on failure that is
-    # not the last one. Keep only slots saved at their requested time; NaN elsewhere.
-    valid = saved_ts[:-1] == ts
-    t_end = jnp.max(jnp.where(jnp.isfinite(saved_ts), saved_ts, -jnp.inf))
-    i_end = jnp.argmax(saved_ts == t_end)
-    y_end = jax.tree_util.tree_map(lambda a: a[i_end], saved_ys)
+    saved = jnp.isfinite(sol.ts) & ~invalid
+    t_end = jnp.max(jnp.where(jnp.isfinite(sol.ts), sol.ts, -jnp.inf))
+    i_end = jnp.argmax(sol.ts == t_end)
+    y_end = jax.tree_util.tree_map(lambda a: a[i_end], sol.ys)
 
     def _mask(a):
-        keep = valid.reshape(valid.shape + (1,) * (a.ndim - 1))
-        return jnp.where(keep, a[:-1], jnp.nan)
+        keep = saved.reshape(saved.shape + (1,) * (a.ndim - 1))
+        return jnp.where(keep, a, jnp.nan)
 
-    ys = jax.tree_util.tree_map(_mask, saved_ys)
-    result = _classify(sol_result, formulation, scene, y_end, t_end, ys, ts[-1] - ts[0])
-    return Trajectory.build(
-        scene,
-        formulation,
-        ts,
-        ys,
-        stats=stats,
-        result=result,
-        t_stop=t_end,
-        interpolation=interpolation,
-    )
-
-# --------------------------------------------------------------------------- exact
-
-
-def check_exact_scene(scene: Scene) -> None:
-    """Raise ``ValueError`` unless ``scene`` is torque free, as ``solver="exact"`` needs.
-
-    Allowed: a :class:`~jrigid.scene.FreeRotation` or :class:`~jrigid.scene.FreeFlight`
-    holder whose loads are only :class:`~jrigid.scene.Gravity` (no torque about the
-    centre of mass; in free flight the centre of mass follows a parabola).
-    """
-    names = ", ".join(type(load).__name__ for load in scene.loads)
-    holder = type(scene.holder).__name__
-    if not isinstance(scene.holder, (FreeRotation, FreeFlight)):
-        if names:
-            what = f"needs a torque-free scene; this scene has a {holder} with {names}"
-        else:
-            what = (
-                "solves rotation about the centre of mass (FreeRotation or FreeFlight); "
-                f"this scene has a {holder} holder"
-            )
-        raise ValueError(f"solver='exact' {what}: use a diffrax solver")
-    others = [type(load).__name__ for load in scene.loads if not isinstance(load, Gravity)]
-    if others:
-        raise ValueError(
-            "solver='exact' needs a torque-free scene; this scene has a "
-            f"{holder} with {', '.join(others)} load(s): use a diffrax solver"
-        )
-
-
-class ExactMotion(eqx.Module):
-    """Closed-form motion of a torque-free scene as a dense output (``evaluate(t)``).
-
-    ``evaluate(t)`` returns the formulation's state at time ``t``: ``q, ω`` from
-    :func:`jrigid.exact.evaluate` and, in free flight, ``x = x0 + v0 Δt + ½ g Δt²``,
-    ``v = v0 + g Δt`` with ``Δt = t − t0`` and ``g`` the sum of the scene's gravity fields.
-    """
-
-    consts: exact.ExactConstants
-    t0: jax.Array
-    x0: jax.Array | None
-    v0: jax.Array | None
-    scene: Scene
-    formulation: AbstractFormulation = eqx.field(static=True)
-
-    def evaluate(self, t):
-        dt = t - self.t0
-        q, omega = exact.evaluate(self.consts, dt)
-        x = v = None
-        if self.scene.translates:
-            g = jnp.zeros(3, dtype=dt.dtype)
-            for load in self.scene.loads:
-                g = g + load.g
-            x = self.x0 + dt * self.v0 + (0.5 * dt * dt) * g
-            v = self.v0 + dt * g
-        state = State(q, quat.derivative(q, omega), x, v)
-        return self.formulation.from_state(self.scene, state)
-
-
-@eqx.filter_jit
-def _solve_exact(scene, state, ts, rtol, atol, formulation, dense):
-    state, ts = _guard((state, ts), problems(formulation, scene, state, ts, rtol, atol))
-    scene = eqx.tree_at(lambda s: s.body, scene, scene.body.check())
-    state = _normalised(state)
-    consts = exact.prepare(scene.body.moments, state.q, state.omega)
-    motion = ExactMotion(consts, ts[0], state.x, state.v, scene, formulation)
-    ys = jax.vmap(motion.evaluate)(ts)
-    result = jnp.where(_all_finite(ys), Result.success, Result.nonfinite).astype(jnp.int32)
-    zero = jnp.zeros((), jnp.int32)
-    stats = dict(num_steps=zero, num_accepted_steps=zero, num_rejected_steps=zero)
-    return Trajectory.build(
-        scene,
-        formulation,
-        ts,
-        ys,
-        stats=stats,
-        result=result,
-        t_stop=ts[-1],
-        interpolation=motion if dense else None,
-    )
+    ys = jax.tree_util.tree_map(_mask, sol.ys)
+    filled = jax.tree_util.tree_map(lambda a: jnp.where(jnp.isnan(a), 0.0, a), ys)
+    result = classify(sol.result, formulation, scene, y_end, t_end, filled, ts[-1] - ts[0],
+                      event is not None)
+    result = jnp.where(invalid, jnp.int32(Result.invalid_input), result)
+    stats = {k: sol.stats[k] for k in ("num_steps", "num_accepted_steps", "num_rejected_steps")}
+    return Trajectory.build(scene, formulation, jnp.where(saved, sol.ts, jnp.nan), ys,
+                            stats=stats, result=result, t_stop=t_end,
+                            interpolation=interpolation)
 
 
 def simulate(
@@ -514,9 +200,12 @@ def simulate(
     max_steps: int = 100_000,
     dt0: ArrayLike | None = None,
     adjoint: diffrax.AbstractAdjoint | None = None,
-    project: bool = True,
+    project: bool | str = True,
     dense: bool = False,
     throw: bool = True,
+    saveat: diffrax.SaveAt | None = None,
+    stepsize_controller: diffrax.AbstractStepSizeController | None = None,
+    event: diffrax.Event | None = None,
 ) -> Trajectory:
     """Integrate ``scene`` from ``initial_state`` and sample the motion at ``ts``.
 
@@ -530,21 +219,39 @@ def simulate(
         formulation: name (``"quaternion_acceleration"`` default, ``"quaternion_omega"``,
             ``"body_omega"``, ``"euler_angles"``) or a formulation object (e.g.
             ``QuaternionAcceleration(stabilization=1.0)``).
-        solver: any diffrax solver; default ``diffrax.Tsit5()``. Or ``"exact"``: the
-            closed-form solution (:mod:`jrigid.exact`) for torque-free scenes only
-            (:func:`check_exact_scene`); then ``rtol``, ``atol``, ``max_steps``, ``dt0``,
-            ``adjoint`` and ``project`` are ignored, ``stats`` are zero, and
-            ``dense=True`` keeps the closed form for :meth:`Trajectory.at`.
+        solver: any diffrax solver; default :data:`DEFAULT_SOLVER`
+            (:class:`jrigid.solvers.FusedTsit5`). Fixed-step solvers (``diffrax.Euler``,
+            ``diffrax.Heun``, ...) need ``stepsize_controller=diffrax.ConstantStepSize()``
+            and ``dt0``. Or ``"exact"``: the closed-form motion (:mod:`jrigid.closed_form`)
+            for torque-free scenes; then ``rtol``, ``atol``, ``max_steps``, ``dt0``,
+            ``adjoint`` and ``project`` are ignored, ``stats`` are zero, and ``dense=True``
+            keeps the closed form for :meth:`Trajectory.at`.
         rtol, atol: PID tolerances, traced (changing them does not recompile). Defaults
             ``1e-8`` and ``1e-10`` (float64), ``1e-5`` and ``1e-7`` (float32).
             ``rtol`` must be finite, ``> 0`` and at least ``10 eps``.
         max_steps: static step budget (accepted plus rejected steps).
         dt0: initial step; ``None`` lets diffrax choose.
-        adjoint: diffrax adjoint; default ``diffrax.RecursiveCheckpointAdjoint()``.
-        project: wrap the solver in :class:`ProjectedSolver` (quaternion formulations).
+        adjoint: diffrax adjoint; default ``diffrax.RecursiveCheckpointAdjoint()``
+            (reverse mode), or ``diffrax.ForwardMode()`` when the inputs are being
+            forward-differentiated (``jax.jacfwd``). For ``jax.jacfwd(jax.jit(f))``, where
+            the forward derivative is taken outside the ``jit``, pass
+            ``adjoint=diffrax.ForwardMode()`` yourself (JAX otherwise fails with "can't
+            apply forward-mode autodiff (jvp) to a custom_vjp function").
+        project: ``True`` (default): after every step (and at every output) put a
+            quaternion formulation's state back on ``|q| = 1`` (``q·q̇ = 0``) and restore
+            the scene's invariants (:mod:`jrigid.invariants`); ``"manifold"``: the
+            constraints only; ``False``: nothing.
         dense: keep the dense interpolation for :meth:`Trajectory.at`.
         throw: raise on failure (see the module docstring); ``False`` returns the
-            :class:`Result` code in ``Trajectory.result``.
+            :class:`~jrigid.trajectory.Result` code in ``Trajectory.result``.
+        saveat: a ``diffrax.SaveAt`` instead of ``SaveAt(ts=ts)`` (e.g. ``steps=True``;
+            ``ts`` then only gives the time span). The trajectory's ``ts`` are the saved
+            times (diffrax's unfilled slots become NaN).
+        stepsize_controller: a diffrax controller instead of the PID controller built
+            from ``rtol``/``atol`` (e.g. ``diffrax.ConstantStepSize()`` with ``dt0``).
+        event: a terminating ``diffrax.Event``; when it fires the result is
+            :attr:`~jrigid.trajectory.Result.event` (not a failure) and outputs after
+            ``t_stop`` are NaN. Its functions receive ``args = scene``.
 
     Returns:
         :class:`~jrigid.trajectory.Trajectory`; ``stats`` holds step counts.
@@ -554,81 +261,59 @@ def simulate(
             impossible tolerances, a scene the formulation cannot represent,
             ``solver="exact"`` for a scene with a torque, ...).
         SimulationError: a failed integration, when ``throw`` and values are concrete.
+
+    Example:
+        >>> import jax.numpy as jnp, jrigid
+        >>> scene = jrigid.Scene(jrigid.RigidBody(jnp.array([1.0, 2.0, 3.0])))
+        >>> state = jrigid.initial.from_omega(omega=jnp.array([0.01, 1.0, 0.01]))
+        >>> traj = jrigid.simulate(scene, state, jnp.linspace(0.0, 10.0, 11))
+        >>> traj.q.shape, int(traj.result)
+        ((11, 4), 0)
     """
     formulation = get_formulation(formulation)
     if isinstance(scene, Scene) and any(load.impulsive for load in scene.loads):
         raise ValueError("a scene with a Floor bounces: use jrigid.contact.simulate_bounces")
+    dtype = jnp.result_type(float)
     if isinstance(solver, str):
         if solver != "exact":
             raise ValueError(f"solver must be a diffrax solver or 'exact', got {solver!r}")
-        state, ts, rtol, atol = prepare(
-            scene, initial_state, ts, None, None, jnp.result_type(float)
-        )
-        check_exact_scene(scene)
+        state, ts, rtol, atol = prepare(scene, initial_state, ts, None, None, dtype)
+        closed_form.check_scene(scene)
         formulation.check_scene(scene)
-        validate(formulation, scene, state, ts, rtol, atol)
-        traj = _solve_exact(scene, state, ts, rtol, atol, formulation, bool(dense))
-        return _raise_on_failure(traj, throw, ts, rtol, atol, max_steps)
-    solver, adjoint, dt0 = solver_options(solver, adjoint, max_steps, dt0)
-    state, ts, rtol, atol = prepare(scene, initial_state, ts, rtol, atol, jnp.result_type(float))
-    formulation.check_scene(scene)
-    validate(formulation, scene, state, ts, rtol, atol)
-    project = bool(project) and formulation.carries_quaternion
-    traj = _solve(
-        scene, state, ts, rtol, atol, dt0,
-        formulation, solver, adjoint, max_steps, project, bool(dense),
-    )
-    return _raise_on_failure(traj, throw, ts, rtol, atol, max_steps)
-
-
-def solver_options(solver, adjoint, max_steps, dt0):
-    """Defaults and checks of the numerical solve's options: ``(solver, adjoint, dt0)``.
-
-    ``solver`` defaults to ``diffrax.Tsit5()``, ``adjoint`` to
-    ``diffrax.RecursiveCheckpointAdjoint()``; ``ValueError`` for a non-diffrax solver, a
-    ``max_steps`` that is not a positive int, or a concrete ``dt0`` that is not finite and
-    positive.
-    """
-    solver = diffrax.Tsit5() if solver is None else solver
-    if not isinstance(solver, diffrax.AbstractSolver):
-        raise ValueError(f"solver must be a diffrax solver, got {solver!r}")
-    adjoint = diffrax.RecursiveCheckpointAdjoint() if adjoint is None else adjoint
-    if not isinstance(max_steps, int) or max_steps < 1:
-        raise ValueError(f"max_steps must be a positive int, got {max_steps!r}")
-    if dt0 is not None:
-        dt0 = jnp.asarray(dt0, dtype=jnp.result_type(float))
-        if not is_traced(dt0) and not bool(jnp.isfinite(dt0) & (dt0 > 0)):
-            raise ValueError(f"dt0 must be finite and > 0, got {dt0}")
-    return solver, adjoint, dt0
-
-
-def _raise_on_failure(traj, throw, ts, rtol, atol, max_steps):
-    """Apply ``throw`` (see :func:`simulate`) to a solved trajectory."""
-    if not throw:
-        return traj
-    if is_traced(traj.result):
-        messages = [""] + [_traced_message(Result(k), max_steps) for k in range(1, len(Result))]
-        codes = traj.result.reshape(-1)  # one code, or a batch's (first failure reported)
-        first = codes[jnp.argmax(codes != 0)]
-        return eqx.branched_error_if(traj, jnp.any(codes != 0), first, messages)
-    codes = jax.device_get(traj.result)
-    which = ""
-    if codes.ndim:  # a batch (jrigid.ensemble.simulate_lockstep): report its first failure
-        failed = codes.reshape(-1) != 0
-        if not failed.any():
-            return traj
-        k = int(failed.argmax())
-        which = f"member {k} of {failed.size} ({int(failed.sum())} failed) "
-        traj = jax.tree_util.tree_map(lambda a: a.reshape(-1, *a.shape[codes.ndim:])[k], traj)
-    code = Result(int(traj.result))
-    if code != Result.success:
-        cause, remedy = _CAUSE[code]
-        raise SimulationError(
-            f"jrigid.simulate failed {which}at t={float(traj.t_stop):.6g} "
-            f"(integrating {float(ts[0]):.6g} → {float(ts[-1]):.6g}, "
-            f"{int(traj.stats['num_accepted_steps'])} accepted and "
-            f"{int(traj.stats['num_rejected_steps'])} rejected steps, "
-            f"rtol={float(rtol):.3g}, atol={float(atol):.3g}): "
-            f"{cause.format(max_steps=max_steps)}; remedy: {remedy}."
+        traj, cause, messages = closed_form.solve(
+            scene, state, ts, rtol, atol, formulation, bool(dense)
         )
-    return traj
+        return raise_on_failure(traj, throw, ts, rtol, atol, max_steps, messages, cause)
+    solver, adjoint, dt0, max_steps = solver_options(solver, adjoint, max_steps, dt0)
+    if isinstance(adjoint, diffrax.RecursiveCheckpointAdjoint) and _forward_differentiated(
+        (scene, initial_state, ts, rtol, atol)
+    ):
+        adjoint = diffrax.ForwardMode()
+    state, ts, rtol, atol = prepare(scene, initial_state, ts, rtol, atol, dtype)
+    formulation.check_scene(scene)
+    _check_saveat(saveat)
+    if stepsize_controller is not None:
+        if not isinstance(stepsize_controller, diffrax.AbstractStepSizeController):
+            raise ValueError(
+                f"stepsize_controller must be a diffrax controller, got {stepsize_controller!r}"
+            )
+        if isinstance(stepsize_controller, diffrax.ConstantStepSize) and dt0 is None:
+            raise ValueError("a ConstantStepSize controller needs dt0 (the step)")
+    if event is not None:
+        if not isinstance(event, diffrax.Event):
+            raise ValueError(f"event must be a diffrax.Event, got {event!r}")
+        if formulation.event() is not None:
+            raise ValueError(
+                f"the {formulation.name} formulation has its own event (gimbal lock); pass "
+                "a user event with a quaternion formulation"
+            )
+    try:
+        traj, cause, messages = _solve(
+            scene, state, ts, rtol, atol, dt0, formulation, solver, adjoint, max_steps,
+            _project_mode(project), bool(dense), saveat, stepsize_controller, event,
+        )
+    except TypeError as error:
+        if "custom_vjp" in str(error) or "forward-mode" in str(error):
+            raise TypeError(_FORWARD_MODE_HINT) from error
+        raise
+    return raise_on_failure(traj, throw, ts, rtol, atol, max_steps, messages, cause)

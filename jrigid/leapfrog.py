@@ -30,8 +30,8 @@ from jax.typing import ArrayLike
 
 from jrigid import quaternion as quat
 from jrigid.formulations import AbstractFormulation
-from jrigid.integrate import Result, _guard, _normalised, prepare, problems, validate
-from jrigid.scene import Scene, _solve3
+from jrigid.scene import Scene
+from jrigid.solve import finish_sampled, guard, input_checks, normalised, prepare, validate
 from jrigid.state import Kinematics, State
 from jrigid.trajectory import Trajectory
 
@@ -48,7 +48,7 @@ class LeapfrogState(eqx.Module):
 
 
 def _omega(scene: Scene, q: jax.Array, L: jax.Array) -> jax.Array:
-    return _solve3(scene.inertia(), quat.rotate_inverse(q, L))
+    return scene.omega_from_momentum(quat.rotate_inverse(q, L))
 
 
 class _LeapfrogVariables(AbstractFormulation):
@@ -112,10 +112,9 @@ _VARIABLES = _LeapfrogVariables()
 
 @eqx.filter_jit
 def _run(scene, state, ts, rtol, atol, dt, variant):
-    state, ts = _guard((state, ts), problems(_VARIABLES, scene, state, ts, rtol, atol))
+    state, ts = guard((state, ts), input_checks(_VARIABLES, scene, state, ts, rtol, atol))
     dt = eqx.error_if(dt, ~(jnp.isfinite(dt) & (dt > 0)), "leapfrog: dt must be finite and > 0")
-    scene = eqx.tree_at(lambda s: s.body, scene, scene.body.check())
-    state = _normalised(state)
+    state = normalised(state)
     L0 = quat.rotate(state.q, scene.inertia() @ state.omega)
     y0 = LeapfrogState(state.q, L0, state.x, state.v)
 
@@ -133,12 +132,7 @@ def _run(scene, state, ts, rtol, atol, dt, variant):
 
     (_, steps), ys = jax.lax.scan(interval, (y0, jnp.int32(0)), jnp.arange(ts.shape[0] - 1))
     ys = jax.tree_util.tree_map(lambda a0, a: jnp.concatenate([a0[None], a]), y0, ys)
-    finite = jnp.all(jnp.stack([jnp.all(jnp.isfinite(a)) for a in jax.tree_util.tree_leaves(ys)]))
-    stats = dict(num_steps=steps, num_accepted_steps=steps, num_rejected_steps=jnp.int32(0))
-    result = jnp.where(finite, Result.success, Result.nonfinite).astype(jnp.int32)
-    return Trajectory.build(
-        scene, _VARIABLES, ts, ys, stats=stats, result=result, t_stop=ts[-1]
-    )
+    return finish_sampled(scene, _VARIABLES, ts, ys, steps=steps)
 
 
 def leapfrog(

@@ -23,18 +23,20 @@ All methods here act on one (unbatched) state; batch with ``jax.vmap``.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, ClassVar
+from typing import Any, ClassVar, NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from jrigid import linalg
 from jrigid import quaternion as quat
 from jrigid.body import RigidBody
 from jrigid.state import Kinematics
 
 __all__ = [
     "AbstractHolder",
+    "Conserved",
     "AbstractLoad",
     "FreeFlight",
     "FreeRotation",
@@ -43,25 +45,6 @@ __all__ = [
     "Scene",
     "Torque",
 ]
-
-
-def _solve3(a: jax.Array, b: jax.Array) -> jax.Array:
-    """``a⁻¹ b`` for one ``(3, 3)`` matrix by the adjugate (cheap and differentiable)."""
-    c0 = _cross(a[:, 1], a[:, 2])
-    c1 = _cross(a[:, 2], a[:, 0])
-    c2 = _cross(a[:, 0], a[:, 1])
-    det = jnp.dot(a[:, 0], c0)
-    return jnp.stack([jnp.dot(c0, b), jnp.dot(c1, b), jnp.dot(c2, b)]) / det
-
-
-def _cross(a: jax.Array, b: jax.Array) -> jax.Array:
-    return jnp.stack(
-        [
-            a[1] * b[2] - a[2] * b[1],
-            a[2] * b[0] - a[0] * b[2],
-            a[0] * b[1] - a[1] * b[0],
-        ]
-    )
 
 
 # --------------------------------------------------------------------------- holders
@@ -167,7 +150,7 @@ class Gravity(AbstractLoad):
         zero = jnp.zeros(3, dtype=kin.omega.dtype)
         if scene.holder.pivoted:
             g_body = quat.rotate_inverse(kin.q, self.g)
-            return zero, _cross(scene.body.com, m * g_body)
+            return zero, linalg.cross(scene.body.com, m * g_body)
         if scene.holder.translates:
             return m * self.g, zero
         return zero, zero
@@ -175,9 +158,9 @@ class Gravity(AbstractLoad):
     def potential(self, kin, scene):
         m = scene.body.mass
         if scene.holder.pivoted:
-            return -m * jnp.dot(self.g, quat.rotate(kin.q, scene.body.com))
+            return -m * linalg.dot(self.g, quat.rotate(kin.q, scene.body.com))
         if scene.holder.translates:
-            return -m * jnp.dot(self.g, kin.x)
+            return -m * linalg.dot(self.g, kin.x)
         return jnp.zeros((), dtype=kin.omega.dtype)
 
 
@@ -236,6 +219,21 @@ def _as_loads(loads) -> tuple:
     return tuple(loads)
 
 
+class Conserved(NamedTuple):
+    """Conserved quantities of a state (see :meth:`Scene.conserved`).
+
+    Attributes:
+        values: ``(4,)`` the quantities.
+        scales: ``(4,)`` positive sizes of the terms each is made of (for relative
+            residuals).
+        active: ``(4,)`` bool, the slots to enforce at this state.
+    """
+
+    values: jax.Array
+    scales: jax.Array
+    active: jax.Array
+
+
 class Scene(eqx.Module):
     """One body, how it is held, and what acts on it.
 
@@ -270,6 +268,103 @@ class Scene(eqx.Module):
         return self.holder.translates
 
     @property
+    def torque_free(self) -> bool:
+        """Whether no torque acts about the rotation centre (static).
+
+        True for :class:`FreeRotation` and :class:`FreeFlight` holders whose loads are
+        all :class:`Gravity` (a uniform field exerts no torque about the centre of mass).
+        """
+        return not self.holder.pivoted and all(isinstance(load, Gravity) for load in self.loads)
+
+    @property
+    def conservative_top(self) -> bool:
+        """Whether this is a body on a :class:`Pivot` under :class:`Gravity` only (static)."""
+        return (
+            self.holder.pivoted
+            and bool(self.loads)
+            and all(isinstance(load, Gravity) for load in self.loads)
+        )
+
+    def conserved(self, kin: Kinematics) -> Conserved | None:
+        """What the exact motion conserves, as a :class:`Conserved` (or ``None``).
+
+        The scene says what its motion conserves, so that integrators can restore it
+        (:func:`jrigid.invariants.project`). Four slots:
+
+        - torque free (:attr:`torque_free`): ``|L|²`` and, for ``k = 1, 2, 3``,
+          ``Δ_k = 2 E I_k − |L|² = Σ_j I_j (I_k − I_j) ω_j²`` (eq. 17.30b; ``E`` the
+          rotational kinetic energy). Energy and ``|L|`` fix all four; only ``|L|²`` and
+          the ``Δ_k`` of the axis nearest the momentum are marked active: written as a
+          sum without that axis's term, it is exact to rounding even for a spin close to
+          that axis, where the energy and ``|L|²`` alone are nearly dependent;
+        - a body on a pivot under gravity only (:attr:`conservative_top`): the total
+          energy ``½ ω·I_p ω − M g·(R r)``, the momentum component along gravity
+          ``L_space·ĝ``, and — active only when the body is symmetric about the line
+          from the pivot to its centre of mass — the momentum component ``L·r̂`` along
+          that line (the Lagrange top's ``L₃``); the fourth slot is unused;
+        - anything else (a user torque, no load on a pivot): ``None``.
+
+        Args:
+            kin: one state's :class:`~jrigid.state.Kinematics` (``q`` unit).
+        """
+        omega = kin.omega
+        dtype = omega.dtype
+        if self.torque_free:
+            m = self.body.moments
+            L = m * omega
+            L2 = linalg.dot(L, L)
+            w2 = omega * omega
+            deltas = [
+                sum(m[j] * (m[k] - m[j]) * w2[j] for j in range(3) if j != k) for k in range(3)
+            ]
+            nearest = jnp.argmax(jnp.abs(L))
+            active = jnp.stack([jnp.array(True), nearest == 0, nearest == 1, nearest == 2])
+            return Conserved(jnp.stack([L2, *deltas]), jnp.full(4, L2), active)
+        if not self.conservative_top:
+            return None
+        L = self.angular_momentum(omega)
+        g = sum((load.g for load in self.loads), jnp.zeros(3, dtype))
+        g_norm = jnp.sqrt(linalg.dot(g, g))
+        g_hat = g / g_norm
+        kinetic = self.kinetic_energy(omega)
+        potential = self.potential_energy(kin)
+        r = self.body.com
+        r_norm = jnp.sqrt(linalg.dot(r, r))
+        r_hat = r / jnp.where(r_norm > 0, r_norm, 1.0)
+        # Scales: the sizes of the terms that make up each invariant; at rest a top's
+        # momentum scale is I ν_g with ν_g² = M |g| |r| / I (its pendulum frequency).
+        weight = self.body.mass * g_norm * r_norm
+        inertia = jnp.max(jnp.diagonal(self.inertia()))
+        momentum = jnp.sqrt(linalg.dot(L, L)) + jnp.sqrt(inertia * weight)
+        values = jnp.stack(
+            [kinetic + potential, linalg.dot(quat.rotate(kin.q, L), g_hat), linalg.dot(L, r_hat),
+             jnp.zeros((), dtype)]
+        )
+        scales = jnp.stack([kinetic + weight, momentum, momentum, jnp.ones((), dtype)])
+        active = jnp.stack(
+            [jnp.array(True), jnp.array(True), self.symmetric_about_lever(), jnp.array(False)]
+        )
+        return Conserved(values, scales, active)
+
+    def symmetric_about_lever(self) -> jax.Array:
+        """``()`` bool: the body is symmetric about the pivot–centre-of-mass line.
+
+        True when the centre of mass lies on a principal axis ``k`` and the two other
+        central moments agree to within 64 machine epsilons (then ``L·r̂`` is conserved
+        on a pivot under gravity: the Lagrange top). False without a lever arm.
+        """
+        m = self.body.moments
+        r = self.body.com
+        eps = 64 * jnp.finfo(m.dtype).eps
+        flags = []
+        for k in range(3):
+            i, j = [a for a in range(3) if a != k]
+            on_axis = (r[i] == 0) & (r[j] == 0) & (r[k] != 0)
+            equal = jnp.abs(m[i] - m[j]) <= eps * jnp.maximum(m[i], m[j])
+            flags.append(on_axis & equal)
+        return flags[0] | flags[1] | flags[2]
+
+    @property
     def needs_orientation(self) -> bool:
         """Whether some load depends on the orientation (static)."""
         return any(load.uses_orientation(self) for load in self.loads)
@@ -286,7 +381,7 @@ class Scene(eqx.Module):
         if self.holder.pivoted:
             r = self.body.com
             eye = jnp.eye(3, dtype=r.dtype)
-            tensor = tensor + self.body.mass * (jnp.dot(r, r) * eye - jnp.outer(r, r))
+            tensor = tensor + self.body.mass * (linalg.dot(r, r) * eye - r[:, None] * r[None, :])
         return tensor
 
     def omega_dot(self, omega: jax.Array, torque: jax.Array) -> jax.Array:
@@ -301,9 +396,9 @@ class Scene(eqx.Module):
         """
         if self.holder.pivoted:
             tensor = self.inertia()
-            return _solve3(tensor, torque - _cross(omega, tensor @ omega))
+            return linalg.solve3(tensor, torque - linalg.cross(omega, linalg.matvec(tensor, omega)))
         moments = self.body.moments
-        return (torque - _cross(omega, moments * omega)) / moments
+        return (torque - linalg.cross(omega, moments * omega)) / moments
 
     def wrench(self, t, kin: Kinematics) -> tuple[jax.Array, jax.Array]:
         """Total ``(force (3,) space frame, torque (3,) body frame)`` of all loads."""
@@ -315,15 +410,27 @@ class Scene(eqx.Module):
             torque = torque + n
         return force, torque
 
+    def omega_from_momentum(self, L: jax.Array) -> jax.Array:
+        """``(3,)`` body angular velocity ``ω = I⁻¹ L`` from the body-frame momentum (17.30b).
+
+        Args:
+            L: ``(3,)`` body-frame angular momentum about the rotation centre.
+        """
+        if self.holder.pivoted:
+            return linalg.solve3(self.inertia(), L)
+        return L / self.body.moments
+
     def angular_momentum(self, omega: jax.Array) -> jax.Array:
         """``(3,)`` body-frame angular momentum ``L = I ω`` about the rotation centre (17.30b)."""
-        return self.inertia() @ omega
+        if self.holder.pivoted:
+            return linalg.matvec(self.inertia(), omega)
+        return self.body.moments * omega
 
     def kinetic_energy(self, omega: jax.Array, v: jax.Array | None = None) -> jax.Array:
         """``½ ω·Iω`` (+ ``½ M |v|²`` in free flight)."""
-        energy = 0.5 * jnp.dot(omega, self.inertia() @ omega)
+        energy = 0.5 * linalg.dot(omega, self.angular_momentum(omega))
         if v is not None:
-            energy = energy + 0.5 * self.body.mass * jnp.dot(v, v)
+            energy = energy + 0.5 * self.body.mass * linalg.dot(v, v)
         return energy
 
     def potential_energy(self, kin: Kinematics) -> jax.Array:

@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import equinox as eqx
 import jax
-import jax.numpy as jnp
 
+from jrigid import linalg
 from jrigid import quaternion as quat
 
 __all__ = ["Kinematics", "State", "omega_from_rate"]
@@ -34,7 +34,7 @@ def omega_from_rate(q: jax.Array, qdot: jax.Array) -> jax.Array:
     Returns:
         ``(..., 3)`` body-frame angular velocity.
     """
-    n2 = jnp.sum(q * q, axis=-1, keepdims=True)
+    n2 = linalg.dot(q, q)[..., None]
     return 2.0 * quat.multiply(quat.conjugate(q), qdot)[..., 1:] / n2
 
 

@@ -1,7 +1,15 @@
-"""The :class:`Trajectory` pytree returned by :func:`jrigid.simulate` and the leapfrog."""
+"""What a solve returns: the :class:`Trajectory` pytree and its :class:`Result` codes.
+
+:func:`jrigid.simulate`, the leapfrog, the splitting integrators, the contact solver and
+the lockstep ensembles all return a :class:`Trajectory`; its ``result`` is a
+:class:`Result` code (one per member under ``vmap``), and a failed solve raises
+:class:`SimulationError` when asked to (``throw=True``), with the cause and a remedy
+from :data:`CAUSES`.
+"""
 
 from __future__ import annotations
 
+import enum
 from typing import Any
 
 import equinox as eqx
@@ -12,7 +20,78 @@ from jrigid import quaternion as quat
 from jrigid.formulations import AbstractFormulation
 from jrigid.scene import Scene
 
-__all__ = ["Trajectory"]
+__all__ = ["CAUSES", "Result", "SimulationError", "Trajectory"]
+
+
+class Result(enum.IntEnum):
+    """Outcome codes in ``Trajectory.result`` (an int32 array, one per ``vmap`` member).
+
+    - ``success`` (0): reached the final time;
+    - ``max_steps`` (1): the step budget ran out;
+    - ``step_size_collapse`` (2): the step size fell below ``4 eps |t|`` with a finite
+      vector field (a singular or very stiff solution);
+    - ``nonfinite`` (3): NaN/inf in the vector field or state (e.g. a NaN torque);
+    - ``gimbal_lock`` (4): the Euler-angle formulation reached ``sin θ ≈ 0``;
+    - ``solver_failure`` (5): any other diffrax failure (e.g. an implicit solver's
+      root find);
+    - ``invalid_input`` (6): the inputs failed a check (a zero quaternion, a
+      non-physical inertia, NaN values, bad tolerances): nothing was integrated and
+      every output is NaN. With ``throw=True`` this is a ``ValueError`` instead;
+    - ``event`` (7): a user's ``event`` stopped the solve (not a failure: the outputs
+      after ``t_stop`` are NaN).
+    """
+
+    success = 0
+    max_steps = 1
+    step_size_collapse = 2
+    nonfinite = 3
+    gimbal_lock = 4
+    solver_failure = 5
+    invalid_input = 6
+    event = 7
+
+    @property
+    def failed(self) -> bool:
+        """Whether the code is a failure (everything but ``success`` and ``event``)."""
+        return self not in (Result.success, Result.event)
+
+
+#: ``Result -> (cause, remedy)`` texts of the failure codes (``{max_steps}`` is filled in).
+CAUSES: dict[Result, tuple[str, str]] = {
+    Result.max_steps: (
+        "max_steps={max_steps} exhausted before reaching the final time",
+        "raise max_steps, loosen rtol/atol, or shorten the time span",
+    ),
+    Result.step_size_collapse: (
+        "the step size collapsed (below 4 machine epsilons of t): the solution is "
+        "singular or too stiff there",
+        "check the torque and parameters for a singularity, or try an implicit solver "
+        "such as diffrax.Kvaerno5()",
+    ),
+    Result.nonfinite: (
+        "the vector field or state became non-finite (NaN or inf)",
+        "check the scene parameters and torque function for NaN/inf (e.g. division by "
+        "zero, a NaN parameter)",
+    ),
+    Result.gimbal_lock: (
+        "Euler-angle gimbal lock: |sin θ| fell below min_sin_theta, where the "
+        "Euler-angle rates (eq. 17.36) are singular",
+        "use formulation='quaternion_acceleration' (or 'quaternion_omega')",
+    ),
+    Result.solver_failure: (
+        "the solver reported a failure (e.g. an implicit solver's root find did not "
+        "converge)",
+        "loosen rtol/atol or change the solver",
+    ),
+    Result.invalid_input: (
+        "the inputs failed a check (see the ValueError raised with throw=True)",
+        "fix the input named there",
+    ),
+}
+
+
+class SimulationError(RuntimeError):
+    """A failed integration (cause, time reached, step counts and a remedy in the text)."""
 
 
 def _derived(scene: Scene, formulation: AbstractFormulation, y) -> dict[str, Any]:
@@ -58,8 +137,8 @@ class Trajectory(eqx.Module):
             the space frame (or ``None``).
         x, v: ``(T, 3)`` centre-of-mass position and velocity (free flight), else ``None``.
         stats: dict with ``num_steps``, ``num_accepted_steps``, ``num_rejected_steps``.
-        result: ``()`` int, a :class:`jrigid.integrate.Result` code (0 = success).
-            Values at times after a failure are ``inf``/``NaN``.
+        result: ``()`` int, a :class:`Result` code (0 = success). Values at times
+            after a failure are ``NaN``.
         t_stop: ``()`` the time the integration reached (``ts[-1]`` on success).
         scene: the simulated :class:`~jrigid.scene.Scene`.
         formulation: static, the formulation used.

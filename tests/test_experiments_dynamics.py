@@ -15,6 +15,7 @@ import math
 import numpy as np
 import pytest
 from _experiments import quick_suite
+from scipy import special as sps
 
 NAMES = (
     "dzhanibekov",
@@ -25,6 +26,7 @@ NAMES = (
     "feynman_plate",
     "gyroscope",
     "euler_angle_gyroscope",
+    "spinning_top",
 )
 
 
@@ -260,3 +262,37 @@ def test_euler_angle_gyroscope(results):
     assert n["flip_euler_t_stop"] == pytest.approx(n["flip_quaternion_time_of_min"], abs=0.01)
     assert n["flip_euler_outputs_after_stop_nan"]
     assert "gimbal lock" in n["flip_euler_error_message"]
+
+
+# --------------------------------------------------------------------------- spinning_top
+
+
+def test_spinning_top_closed_form(results):
+    """Problem 17.2: the closed-form top equals the integrated one; released with φ̇0 = θ̇0 = 0
+    (the defaults) its axle starts at the top of its swing and traces cusps."""
+    n, _ = results["spinning_top"]
+    # the integrated run has rtol 1e-10: the two agree far below the 1e-7 the run asserts
+    assert n["q_closed_vs_integrated_max_rad"] < 1e-7
+    assert n["omega_closed_vs_integrated_max_rel"] < 1e-7
+    assert n["locus"] == "cusps" and abs(n["b_minus_a_u2"]) < 1e-12
+    # released at rest at θ0, u = cos θ swings between u0 and the lower root u1 of
+    # β(u0 − u)(u − u1)(u3 − u) (a = I3 ω3/I1, β = 2Mgl/I1, I1 about the pivot), with
+    # period 2K(m)/ω_n, m = (u0 − u1)/(u3 − u1), ω_n = ½√(β(u3 − u1)) (scipy's K)
+    i1, _, i3 = n["moments_about_pivot"]
+    a, beta = i3 * n["omega3"] / i1, 2.0 * n["mgl"] / i1
+    u0, s2 = math.cos(math.radians(n["tilt_deg"])), math.sin(math.radians(n["tilt_deg"])) ** 2
+    p = a * a - 2.0 * beta * u0
+    root = math.sqrt(p * p + 4.0 * beta * beta * s2)
+    drop, spread = 2.0 * beta * s2 / (p + root), root / beta  # u0 − u1, u3 − u1
+    period = 2.0 * sps.ellipk(drop / spread) / (0.5 * math.sqrt(beta * spread))
+    assert n["nutation_period_closed_form"] == pytest.approx(period, rel=1e-12)
+    assert n["theta_min_deg_closed_form"] == pytest.approx(n["tilt_deg"], abs=1e-9)
+    theta_max = math.degrees(math.acos(u0 - drop))
+    assert n["theta_max_deg_closed_form"] == pytest.approx(theta_max, abs=1e-9)
+    # measured on the integrated run: crossings of the mid angle (linear interpolation,
+    # ~100 samples per period) and the sampled extremes (off by at most θ̈ Δt²/8 ≈ 1e-3°)
+    assert n["nutation_period_measured"] == pytest.approx(period, rel=1e-6)
+    assert n["theta_max_deg_measured"] == pytest.approx(theta_max, abs=2e-3)
+    # the closed form keeps energy, L_z and L·e3 to rounding
+    assert max(n["energy_drift_closed_form"], n["Lz_drift_closed_form"]) < 1e-13
+    assert n["L3_drift_closed_form"] < 1e-13

@@ -166,9 +166,10 @@ def test_noisy_truth_within_three_sigma():
     sigma = 0.02
     problem = _fit_problem(fit.Exact(build), ts, gyro_record(ts, sigma, 1), sigma)
     res = fit.fit(problem, START, max_iter=300, gtol=1e-10)
-    assert res.converged, res.reason
+    assert res.converged and res.success, res.message
     lap = fit.laplace(problem, res.params)
     assert lap.rank == 5 and lap.dof == 3 * 41 - 5
+    assert (res.chi2, res.dof) == (pytest.approx(lap.chi2, rel=1e-12), lap.dof)
     assert abs(lap.chi2 - lap.dof) < 5 * np.sqrt(2 * lap.dof)
     m, m_sigma = fit.propagate(lambda p: fit.moment_ratios(p["shape"]), lap)
     assert bool(jnp.all(m_sigma > 0))
@@ -207,8 +208,10 @@ def test_driver_methods_and_stopping(method):
     res = fit.fit(_quadratic, {"x": jnp.zeros(3)}, method=method, max_iter=3000, gtol=1e-7, **kw)
     assert res.converged and res.reason in ("gtol", "ftol")
     np.testing.assert_allclose(res.params["x"], [0.0, 1.0, 2.0], atol=1e-5)
-    short = fit.fit(_quadratic, {"x": jnp.zeros(3)}, method=method, max_iter=2, **kw)
+    with pytest.warns(fit.FitWarning, match="iteration limit"):
+        short = fit.fit(_quadratic, {"x": jnp.zeros(3)}, method=method, max_iter=2, **kw)
     assert short.reason == "max_iter" and not short.converged and short.n_iter == 2
+    assert not short.success and short.causes == ("max_iter",)
 
 
 def test_driver_progress_bar(capsys):

@@ -7,11 +7,13 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optimistix as optx
 import pytest
 from scipy.spatial.transform import Rotation
 from scipy.stats import linregress
 
 from jrigid import initial
+from jrigid import quaternion as quat
 from jrigid.body import RigidBody
 from jrigid.formulations import EulerAngles
 from jrigid.integrate import Result, SimulationError, simulate
@@ -462,3 +464,98 @@ def test_gimbal_lock_detected():
     if int(traj.result) != Result.gimbal_lock:
         assert int(traj.result) == Result.success
         np.testing.assert_allclose(traj.omega, reference.omega, atol=1e-6)
+
+
+# --------------------------------------------------------------------------- options
+
+
+def test_saveat_steps_passes_through():
+    scene, state = free_scene(), initial.from_omega(Q0, OMEGA0)
+    traj = simulate(scene, state, jnp.array([0.0, 2.0]), saveat=diffrax.SaveAt(steps=True),
+                    max_steps=2000, rtol=1e-8, atol=1e-10)
+    ts = np.asarray(traj.ts)
+    n = int(traj.stats["num_accepted_steps"])
+    assert np.all(np.isfinite(ts[:n])) and np.all(np.isnan(ts[n:]))
+    assert ts[n - 1] == pytest.approx(2.0)
+    exact = simulate(scene, state, jnp.concatenate([jnp.zeros(1), jnp.asarray(ts[:n])]),
+                     solver="exact")
+    np.testing.assert_allclose(traj.omega[:n], exact.omega[1:], atol=1e-7)
+    with pytest.raises(ValueError, match="custom fn"):
+        simulate(scene, state, TS, saveat=diffrax.SaveAt(t1=True, fn=lambda t, y, a: y.q))
+
+
+def test_fixed_step_solvers_through_constant_step_size():
+    scene, state = free_scene(), initial.from_omega(Q0, OMEGA0)
+    ts = jnp.linspace(0.0, 2.0, 5)
+    exact = simulate(scene, state, ts, solver="exact")
+    errors = []
+    for dt in (0.02, 0.01):
+        traj = simulate(scene, state, ts, solver=diffrax.Heun(), dt0=dt,
+                        stepsize_controller=diffrax.ConstantStepSize())
+        errors.append(float(np.abs(np.asarray(traj.omega - exact.omega)).max()))
+    assert 3.0 < errors[0] / errors[1] < 5.0  # Heun is second order
+    with pytest.raises(ValueError, match="dt0"):
+        simulate(scene, state, ts, solver=diffrax.Euler(),
+                 stepsize_controller=diffrax.ConstantStepSize())
+
+
+def test_user_event_stops_without_failing():
+    scene, state = free_scene(), initial.from_omega(Q0, OMEGA0)
+    # stop when ω1 first crosses zero
+    event = diffrax.Event(
+        lambda t, y, args, **kw: 2.0 * quat.multiply(quat.conjugate(y.q), y.qdot)[1],
+        optx.Bisection(rtol=1e-12, atol=1e-12),
+    )
+    traj = simulate(scene, state, TS, event=event)
+    assert int(traj.result) == Result.event
+    t_stop = float(traj.t_stop)
+    assert 0.0 < t_stop < float(TS[-1])
+    exact = simulate(scene, state, jnp.array([0.0, t_stop]), solver="exact")
+    assert abs(float(exact.omega[-1, 0])) < 1e-6
+    after = np.asarray(traj.ts) > t_stop
+    assert np.isnan(np.asarray(traj.q)[after]).all()
+    with pytest.raises(ValueError, match="own event"):
+        simulate(scene, state, TS, formulation="euler_angles", event=event)
+
+
+def test_jacfwd_picks_forward_mode_or_names_the_remedy():
+    def final(w1):
+        omega = OMEGA0.at[0].set(w1)
+        return simulate(free_scene(), initial.from_omega(Q0, omega), TS[:21],
+                        rtol=1e-11, atol=1e-13).omega[-1, 1]
+
+    fwd = jax.jacfwd(final)(OMEGA0[0])
+    rev = jax.grad(final)(OMEGA0[0])
+    np.testing.assert_allclose(fwd, rev, rtol=1e-7)
+    np.testing.assert_allclose(jax.jit(jax.jacfwd(final))(OMEGA0[0]), fwd, rtol=1e-10)
+
+
+def test_max_steps_accepts_numpy_integers_refuses_bools():
+    scene, state = free_scene(), initial.from_omega(Q0, OMEGA0)
+    traj = simulate(scene, state, TS[:3], max_steps=np.int64(1000))
+    assert int(traj.result) == 0
+    with pytest.raises(ValueError, match="max_steps"):
+        simulate(scene, state, TS[:3], max_steps=True)
+
+
+def test_invalid_members_of_a_vmap_get_their_own_code():
+    """One bad member (zero quaternion, non-physical body) never stops the others."""
+    moments = jnp.array([[1.0, 2.0, 3.0], [1.0, 1.0, 3.0], [1.0, 2.0, 3.0]])
+    qs = jnp.stack([Q0, Q0, jnp.zeros(4)])
+
+    def run(m, q):
+        state = initial.from_omega(Q0, OMEGA0)
+        state = State(q, state.qdot)
+        return simulate(Scene(RigidBody(m)), state, TS[:11], throw=False)
+
+    trajs = jax.vmap(run)(moments, qs)
+    np.testing.assert_array_equal(trajs.result, [Result.success, Result.invalid_input,
+                                                 Result.invalid_input])
+    assert np.isnan(np.asarray(trajs.q[1:])).all()
+    alone = simulate(free_scene(), initial.from_omega(Q0, OMEGA0), TS[:11])
+    np.testing.assert_allclose(trajs.q[0], alone.q, rtol=0, atol=1e-13)
+    with pytest.raises(eqx.EquinoxRuntimeError, match="triangle"):
+        jax.block_until_ready(
+            jax.vmap(lambda m, q: simulate(Scene(RigidBody(m)), State(q, Q0 * 0), TS[:11]).q)(
+                moments, qs)
+        )

@@ -111,11 +111,11 @@ def _torque(t, kin, params):
     "scene, words",
     [
         (Scene(RigidBody(MOMENTS, com=jnp.array([0.0, 0.0, 1.0])), Pivot(), Gravity(1.0)),
-         ["torque-free", "Pivot with Gravity"]),
+         ["torque-free", "symmetric top", "I1 == I2"]),
         (Scene(RigidBody(MOMENTS), loads=Torque(_torque, -0.1)), ["torque-free", "Torque"]),
         (Scene(RigidBody(MOMENTS), FreeFlight(), (Gravity(), Torque(_torque, -0.1))),
          ["torque-free", "Torque"]),
-        (Scene(RigidBody(MOMENTS, com=jnp.array([0.0, 0.0, 1.0])), Pivot()), ["Pivot"]),
+        (Scene(RigidBody(MOMENTS, com=jnp.array([0.0, 0.0, 1.0])), Pivot()), ["I1 == I2"]),
     ],
 )
 def test_scene_with_torque_rejected(scene, words):
@@ -126,6 +126,24 @@ def test_scene_with_torque_rejected(scene, words):
         simulate(scene, state, TS, solver="exact")
     for word in words:
         assert word in str(err.value)
+
+
+def test_heavy_symmetric_top_in_closed_form():
+    """solver='exact' on a Lagrange top (Problem 17.2) against a tight numerical solve."""
+    body = RigidBody(jnp.array([1.0, 1.0, 0.5]), 1.0, jnp.array([0.0, 0.0, 1.0]))
+    scene = Scene(body, Pivot(), Gravity(1.0))
+    state = initial.from_euler_rates(jnp.array([0.0, 0.6, 0.0]), jnp.array([0.2, 0.1, 5.0]))
+    ts = jnp.linspace(0.0, 30.0, 31)
+    closed = simulate(scene, state, ts, solver="exact", dense=True)
+    numeric = simulate(scene, state, ts, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(closed.omega, numeric.omega, atol=1e-9)
+    same_rotation(closed.q, numeric.q, atol=1e-9)
+    assert int(closed.stats["num_steps"]) == 0
+    mid = closed.at(jnp.array([12.5]))
+    direct = simulate(scene, state, jnp.array([0.0, 12.5]), solver="exact")
+    np.testing.assert_allclose(mid.omega[0], direct.omega[-1], atol=1e-13)
+    e = np.asarray(closed.energy)
+    assert np.abs(e - e[0]).max() < 1e-12
 
 
 def test_unknown_solver_string():

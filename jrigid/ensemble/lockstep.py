@@ -36,24 +36,23 @@ import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 import optimistix as optx
 from jax.typing import ArrayLike
 
-from jrigid._checks import is_traced
 from jrigid.formulations import AbstractFormulation, get_formulation
-from jrigid.integrate import (
+from jrigid.invariants import Invariants
+from jrigid.scene import Scene
+from jrigid.solve import (
     ProjectedSolver,
-    _guard,
-    _normalised,
-    _raise_on_failure,
     controller,
     finish,
+    input_checks,
+    normalised,
     prepare,
-    problems,
+    raise_on_failure,
+    screen,
     solver_options,
 )
-from jrigid.scene import Scene
 from jrigid.state import State
 from jrigid.trajectory import Trajectory
 
@@ -74,8 +73,10 @@ class _Batched(AbstractFormulation):
     def vector_field(self, t, y, scene):
         return jax.vmap(self.inner.vector_field, in_axes=(None, 0, self.scene_axis))(t, y, scene)
 
-    def project(self, y, scene):
-        return jax.vmap(self.inner.project, in_axes=(0, self.scene_axis))(y, scene)
+    def project(self, y, scene, invariants=None):
+        if invariants is None:
+            return jax.vmap(self.inner.project, in_axes=(0, self.scene_axis))(y, scene)
+        return jax.vmap(self.inner.project, in_axes=(0, self.scene_axis, 0))(y, scene, invariants)
 
 
 def _max_member_rms(scaled_error) -> jax.Array:
@@ -94,48 +95,50 @@ def _over_members(fn, scene_axis):
     return over
 
 
-def _member_flags(formulation, scene, states, ts, rtol, atol, scene_axis):
-    """``(bad (N, K), messages (K,))``: :func:`jrigid.integrate.problems` for every member."""
+def _screen_members(formulation, scene, states, ts, rtol, atol, scene_axis):
+    """Screen every member (:func:`jrigid.solve.screen`): stand-in inputs where invalid.
+
+    Returns ``(invalid (N,), cause (N,), scene, states, messages)``. A shared scene
+    (``scene_axis=None``) stays shared: a member's stand-in replaces only its state, and
+    a bad body (invalid for every member) is replaced by the stand-in body.
+    """
     messages: list[str] = []
 
-    def flags(scene_m, state):
-        checks = problems(formulation, scene_m, state, ts, rtol, atol)
+    def one(scene_m, state):
+        checks = input_checks(formulation, scene_m, state, ts, rtol, atol)
         messages[:] = [m for _, m in checks]
-        return jnp.stack([b for b, _ in checks])
+        invalid, cause, scene_m, state, _, _, _ = screen(checks, scene_m, state, ts, rtol, atol)
+        return invalid, cause, scene_m, state
 
-    return _over_members(flags, scene_axis)(scene, states), messages
-
-
-def _validate(formulation, scene, states, ts, rtol, atol, scene_axis) -> None:
-    """``ValueError`` naming the first failed check and its first member (concrete inputs)."""
-    if is_traced((scene, states, ts, rtol, atol)):
-        return
-    bad, messages = eqx.filter_jit(_member_flags)(
-        formulation, scene, states, ts, rtol, atol, scene_axis
-    )
-    bad = np.asarray(bad)
-    if bad.any():
-        check = int(bad.any(axis=0).argmax())
-        member = int(bad[:, check].argmax())
-        raise ValueError(f"{messages[check]} (member {member} of {bad.shape[0]})")
+    invalid, cause, scenes, states = jax.vmap(one, in_axes=(scene_axis, 0))(scene, states)
+    if scene_axis is None:
+        # Every member's stand-in scene equals the scene unless the body itself is bad,
+        # in which case all members are invalid and any stand-in will do.
+        scenes = jax.tree_util.tree_map(lambda a: a[0], scenes)
+    return invalid, cause, scenes, states, tuple(messages)
 
 
 @eqx.filter_jit
 def _solve(scene, states, ts, rtol, atol, dt0, formulation, solver, adjoint, max_steps,
            project, scene_axis):
-    bad, messages = _member_flags(formulation, scene, states, ts, rtol, atol, scene_axis)
-    # Guard only the (replicated) times: every member's solve depends on them, and a
-    # guarded member axis would be gathered to one device when the chunk is sharded.
-    ts = _guard(ts, list(zip(jnp.any(bad, axis=0), messages, strict=True)))
-    scene = eqx.tree_at(
-        lambda s: s.body, scene, _over_members(lambda b: b.check(), scene_axis)(scene.body)
+    invalid, cause, scene, states, messages = _screen_members(
+        formulation, scene, states, ts, rtol, atol, scene_axis
     )
-    y0 = _over_members(lambda sc, s: formulation.from_state(sc, _normalised(s)), scene_axis)(
-        scene, states
-    )
+    states = jax.vmap(normalised)(states)
+    y0 = _over_members(lambda sc, s: formulation.from_state(sc, s), scene_axis)(scene, states)
     batched = _Batched(formulation, scene_axis)
+    save = None
     if project:
-        solver = ProjectedSolver(solver, batched)
+        invariants = None
+        if scene.torque_free or scene.conservative_top:
+            invariants = _over_members(
+                lambda sc, s: Invariants.of(sc, s.q, s.omega), scene_axis
+            )(scene, states)
+        solver = ProjectedSolver(solver, batched, invariants)
+        save = solver.save
+    saveat = diffrax.SaveAt(ts=ts, t1=True)
+    if save is not None:
+        saveat = eqx.tree_at(lambda s: s.subs.fn, saveat, save)
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(batched.vector_field),
         solver,
@@ -144,15 +147,19 @@ def _solve(scene, states, ts, rtol, atol, dt0, formulation, solver, adjoint, max
         dt0,
         y0,
         args=scene,
-        saveat=diffrax.SaveAt(ts=ts, t1=True),
+        saveat=saveat,
         stepsize_controller=controller(ts, rtol, atol, norm=_max_member_rms),
         adjoint=adjoint,
         max_steps=max_steps,
         throw=False,
     )
     ys = jax.tree_util.tree_map(lambda a: jnp.moveaxis(a, 1, 0), sol.ys)  # (N, T + 1, ...)
-    one = lambda sc, y: finish(sc, formulation, ts, sol.ts, y, sol.result, sol.stats)  # noqa: E731
-    return _over_members(one, scene_axis)(scene, ys)
+
+    def one(sc, y, bad):
+        return finish(sc, formulation, ts, sol.ts, y, sol.result, sol.stats, invalid=bad)
+
+    traj = jax.vmap(one, in_axes=(scene_axis, 0, 0))(scene, ys, invalid)
+    return traj, cause, messages
 
 
 def simulate_lockstep(
@@ -221,15 +228,14 @@ def simulate_lockstep(
             "initial_states must have one leading member axis on every array (q (N, 4), "
             f"qdot (N, 4), ...), got shapes {jax.tree_util.tree_map(jnp.shape, initial_states)}"
         )
-    solver, adjoint, dt0 = solver_options(solver, adjoint, max_steps, dt0)
+    solver, adjoint, dt0, max_steps = solver_options(solver, adjoint, max_steps, dt0)
     dtype = jnp.result_type(float)
     states, ts, rtol, atol = jax.vmap(
         lambda s: prepare(scene, s, ts, rtol, atol, dtype), out_axes=(0, None, None, None)
     )(initial_states)
     formulation.check_scene(scene)
     scene_axis = 0 if batched_scene else None
-    _validate(formulation, scene, states, ts, rtol, atol, scene_axis)
     project = bool(project) and formulation.carries_quaternion
-    traj = _solve(scene, states, ts, rtol, atol, dt0, formulation, solver, adjoint, max_steps,
-                  project, scene_axis)
-    return _raise_on_failure(traj, throw, ts, rtol, atol, max_steps)
+    traj, cause, messages = _solve(scene, states, ts, rtol, atol, dt0, formulation, solver,
+                                   adjoint, max_steps, project, scene_axis)
+    return raise_on_failure(traj, throw, ts, rtol, atol, max_steps, messages, cause)

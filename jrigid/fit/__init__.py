@@ -12,19 +12,49 @@ a top, to observed motion, with error bars:
    :class:`AxisDirections`, or derived features of :mod:`jrigid.fit.features`:
    :class:`WobbleRatio`, :class:`PrecessionRate`, :class:`SpinRate`, :class:`Tilt`,
    :class:`NutationRate`, :class:`FlipPeriod`) in a :class:`Problem`;
-4. :func:`fit` (optax L-BFGS or Adam) and :func:`laplace` (Gauss–Newton covariance),
-   :func:`propagate` for derived quantities.
+4. :func:`fit` (optax L-BFGS or Adam, or Levenberg–Marquardt) and :func:`laplace`
+   (Gauss–Newton covariance), :func:`propagate` for derived quantities.
 
-Example::
+:func:`fit` judges its result (:mod:`jrigid.fit.verdict`): ``result.success`` is
+``False``, with a :class:`FitWarning` naming the cause (or a :class:`FitError` with
+``on_bad_fit="raise"``), when χ²/dof is far above 1, the body reaches the edge of the
+physical region, the Jacobian is rank-deficient, or the optimiser stopped short.
 
-    def build(theta):
-        body = RigidBody(fit.moment_ratios(theta["shape"]))
-        return Scene(body), initial.from_omega(None, theta["omega0"])
+Choosing a start. Fits of rigid-body motion have many local optima; start where the
+model is not degenerate and near the data: the initial spin from the first gyroscope
+sample (a gyroscope measures ω(t0) directly), and the shape from a rough guess of the
+moments, ordered like the body's axes and *not* a sphere or a symmetric body (where the
+motion depends on the shape only through degenerate limits) — the proportions of a
+box of about the right size (:func:`jrigid.inertia.box`) will do. The loss of a long
+record has optima on the edge of the physical region (a rod, a flat body) that plain
+descent from a far start often ends in; fitting a growing record,
+``fit(..., horizons=(0.25, 0.5))``, avoids most of them. If the verdict says the fit
+failed, try other starts.
 
-    problem = fit.Problem(fit.Exact(build), fit.Gyroscope(ts, omega_measured, sigma=0.01))
-    result = fit.fit(problem, {"shape": jnp.zeros(2), "omega0": omega_guess})
-    lap = fit.laplace(problem, result.params)
-    moments, moments_sigma = fit.propagate(lambda p: fit.moment_ratios(p["shape"]), lap)
+Example: moment ratios and initial spin of a tumbling body from a noisy gyroscope::
+
+    >>> import jax, jax.numpy as jnp, numpy as np
+    >>> jax.config.update("jax_enable_x64", True)
+    >>> from jrigid import exact, fit, initial
+    >>> from jrigid.body import RigidBody
+    >>> from jrigid.scene import Scene
+    >>> def build(theta):
+    ...     body = RigidBody(fit.moment_ratios(theta["shape"]))
+    ...     return Scene(body), initial.from_omega(None, theta["omega0"])
+    >>> truth = jnp.array([1.0, 2.0, 2.5]) / 5.5          # moment ratios, trace 1
+    >>> ts = jnp.linspace(0.0, 8.0, 41)
+    >>> _, omega = exact.solve(truth, jnp.array([1.0, 0, 0, 0]), jnp.array([0.3, 2.0, 0.2]), ts)
+    >>> measured = omega + 0.02 * np.random.default_rng(0).standard_normal(omega.shape)
+    >>> problem = fit.Problem(fit.Exact(build), fit.Gyroscope(ts, measured, sigma=0.02))
+    >>> start = {"shape": fit.moment_ratios_raw(jnp.array([1.0, 1.5, 2.0])),
+    ...          "omega0": measured[0]}
+    >>> result = fit.fit(problem, start, method="lm")
+    >>> result.success, result.dof, bool(0.7 < result.chi2_dof < 1.3)
+    (True, 118, True)
+    >>> lap = fit.laplace(problem, result.params)
+    >>> moments, moments_sigma = fit.propagate(lambda p: fit.moment_ratios(p["shape"]), lap)
+    >>> bool(np.all(np.abs(moments - truth) < 3 * moments_sigma))
+    True
 """
 
 from jrigid.fit.driver import FitResult, fit
@@ -47,6 +77,7 @@ from jrigid.fit.features import (
 from jrigid.fit.observations import (
     AxisDirections,
     Gyroscope,
+    Observation,
     Orientations,
     Prediction,
     axis_loss,
@@ -64,18 +95,28 @@ from jrigid.fit.params import (
     unit_quaternion,
 )
 from jrigid.fit.problem import Exact, Invariants, Problem, Simulated
-from jrigid.fit.uncertainty import Laplace, laplace, propagate
+from jrigid.fit.uncertainty import (
+    Laplace,
+    laplace,
+    parameter_names,
+    propagate,
+    residuals_and_jacobian,
+)
+from jrigid.fit.verdict import FitError, FitWarning
 
 __all__ = [
     "AxisDirections",
     "Exact",
+    "FitError",
     "FitResult",
+    "FitWarning",
     "FlipPeriod",
     "FreeRates",
     "Gyroscope",
     "Invariants",
     "Laplace",
     "NutationRate",
+    "Observation",
     "Orientations",
     "PrecessionRate",
     "Prediction",
@@ -98,10 +139,12 @@ __all__ = [
     "moments_raw",
     "omega_phase_rate",
     "orientation_loss",
+    "parameter_names",
     "positive",
     "positive_raw",
     "propagate",
     "rates_from_constants",
+    "residuals_and_jacobian",
     "trajectory_rates",
     "unit_quaternion",
     "unwrap",

@@ -1,11 +1,25 @@
 """The :func:`fit` driver: optax's L-BFGS (with its zoom line search), Adam, or
-Levenberg–Marquardt on a :class:`~jrigid.fit.problem.Problem`'s residuals.
+Levenberg–Marquardt on a :class:`~jrigid.fit.problem.Problem`'s residuals — and a
+verdict on the result.
 
 Levenberg–Marquardt (``method="lm"``) takes the residuals' Jacobian by forward mode
 (``jax.jacfwd`` with diffrax's ``ForwardMode``): one tangent per parameter, the right
 choice when the parameters are few (see the README's adjoint measurement), and the
 Gauss–Newton model it steps on is the one :func:`jrigid.fit.laplace` uses for the error
 bars. The first-order methods take reverse-mode gradients.
+
+The Levenberg–Marquardt step solves ``(JᵀJ + μ D) h = −Jᵀr`` with ``D`` the largest
+``diag(JᵀJ)`` met so far (MINPACK's scaling) and accepts it when the gain ratio
+``ρ = (actual decrease)/(decrease predicted by the linear model) > 1e-4``; ``μ`` then
+shrinks by ``max(1/3, 1 − (2ρ − 1)³)``, and on a rejection grows by ``ν = 2, 4, 8, …``
+(Madsen, Nielsen & Tingleff, *Methods for non-linear least squares problems*, 2004,
+§3.2). Marquardt's own ``D = diag(JᵀJ)`` of the current point lets a parameter whose
+Jacobian column fades (a saturating map such as the softmax of
+:func:`jrigid.fit.moment_ratios` near a flat body) take ever longer steps — "parameter
+evaporation" (Transtrum & Sethna, arXiv:1201.5885; one step took a raw shape parameter
+from 5.9 to 112, onto a rod) — the running maximum keeps its damping. No local method
+keeps a fit from far away out of the optima on the edge of the physical region that
+the loss of a long record leads to; a growing record (``horizons``) does.
 
 One compiled step function per call; the loop runs in Python so that it can stop,
 record a history and drive a ``tqdm`` progress bar. Stopping rules, checked before
@@ -15,16 +29,26 @@ every step, in this order:
 - ``ftol``: the decrease of the last step ``|f_{k−1} − f_k| ≤ ftol · max(1, |f_k|)`` →
   converged (for Adam, whose steps do not decrease ``f`` monotonically, it must hold
   for 5 consecutive steps);
-- non-finite loss or gradient → stopped, not converged;
+- non-finite loss or gradient → stopped (``"nonfinite"``), not converged;
+- Levenberg–Marquardt only: no damping up to ``μ = 1e16`` gives an accepted step →
+  ``"ftol"`` if the undamped Gauss–Newton step promises less than the ``ftol`` decrease
+  (the optimum to rounding), else ``"stalled"``, not converged;
 - ``max_iter`` steps taken → stopped, not converged.
+
+Stopping is not success: :func:`fit` then judges the end point (the checks of
+:mod:`jrigid.fit.verdict`: χ², the edge of the physical region, the rank of the
+Jacobian, stationarity) and reports the verdict in :attr:`FitResult.success` and
+:attr:`FitResult.message`.
 """
 
 from __future__ import annotations
 
 import functools
 import sys
+import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 import equinox as eqx
 import jax
@@ -34,24 +58,52 @@ import optax
 from jax.flatten_util import ravel_pytree
 
 from jrigid.fit.problem import Problem
-from jrigid.fit.uncertainty import _residuals_and_jacobian
+from jrigid.fit.uncertainty import Laplace, residuals_and_jacobian
+from jrigid.fit.verdict import (
+    DEFAULT_CHI2_ALPHA,
+    DEFAULT_EDGE_TOL,
+    FitError,
+    FitWarning,
+    assess,
+)
 
 __all__ = ["FitResult", "fit"]
 
+_ON_BAD_FIT = ("warn", "raise", "ignore")
+_MU_MAX = 1e16
 
-@dataclass
+
+@dataclass(repr=False)
 class FitResult:
-    """Outcome of :func:`fit`.
+    """Outcome of :func:`fit`, laid out like scipy's ``least_squares`` result.
 
     Attributes:
         params: the final parameter pytree.
-        loss: final loss value.
+        loss: final loss value (``½ χ²`` for a :class:`~jrigid.fit.Problem`).
         grad_norm: final ``‖∇f‖_∞``.
         n_iter: optimiser steps taken.
-        converged: whether ``gtol`` or ``ftol`` was met.
-        reason: why the loop stopped (``"gtol"``, ``"ftol"``, ``"max_iter"``, ``"nonfinite"``).
+        converged: the optimiser's own stop: ``gtol`` or ``ftol`` was met. Not the
+            verdict: see ``success``.
+        reason: why the loop stopped (``"gtol"``, ``"ftol"``, ``"max_iter"``,
+            ``"nonfinite"``, ``"stalled"``).
+        success: the verdict: converged, and none of the checks of
+            :mod:`jrigid.fit.verdict` failed.
+        message: the verdict in words, the causes of a failure first.
+        causes: the failed checks (``"chi2"``, ``"edge"``, ``"rank"``,
+            ``"not_stationary"``, ``"max_iter"``, ``"stalled"``, ``"nonfinite"``).
+        chi2: ``Σ r²`` of the whitened residuals (``None`` for a plain objective).
+        dof: residuals minus the Jacobian's rank.
+        chi2_dof: reduced χ², ``chi2 / dof`` (``None`` when ``dof ≤ 0``).
+        p_value: χ² upper tail probability (``None`` when not tested: ``σ`` not given
+            or ``dof ≤ 0``).
+        sigma_given: every observation came with its noise level.
+        laplace: the :class:`~jrigid.fit.Laplace` covariance at ``params`` (scaled by
+            ``χ²/dof`` when ``σ`` was not given), or ``None``.
+        residuals: ``(N,)`` whitened residuals at ``params`` (scipy's ``fun``).
+        jac: ``(N, P)`` their Jacobian (flattened parameters).
         history: ``{"loss": [...], "grad_norm": [...], "params": [...]}``, one entry per
-            evaluated iterate (the start included); ``params`` only with ``record_params``.
+            evaluated iterate (the start of each stage included, see ``horizons``);
+            ``params`` only with ``record_params``.
     """
 
     params: Any
@@ -60,15 +112,70 @@ class FitResult:
     n_iter: int
     converged: bool
     reason: str
+    success: bool = False
+    message: str = ""
+    causes: tuple[str, ...] = ()
+    chi2: float | None = None
+    dof: int | None = None
+    chi2_dof: float | None = None
+    p_value: float | None = None
+    sigma_given: bool | None = None
+    laplace: Laplace | None = None
+    residuals: jax.Array | None = None
+    jac: jax.Array | None = None
     history: dict = field(default_factory=dict)
 
+    @property
+    def cov(self) -> jax.Array | None:
+        """``(P, P)`` covariance of the flattened parameters (see :class:`~jrigid.fit.Laplace`)."""
+        return None if self.laplace is None else self.laplace.cov
 
-def _as_loss(objective):
-    if isinstance(objective, Problem):
-        return objective.loss
-    if not callable(objective):
-        raise ValueError("objective must be a Problem or a callable theta -> scalar loss")
-    return objective
+    @property
+    def sigma(self) -> Any:
+        """Standard deviations, a pytree like ``params`` (``inf`` where undetermined)."""
+        return None if self.laplace is None else self.laplace.sigma
+
+    def __repr__(self) -> str:
+        stat = "" if self.chi2_dof is None else f", chi2_dof={self.chi2_dof:.4g}"
+        return (
+            f"FitResult(success={self.success}, reason={self.reason!r}, n_iter={self.n_iter}, "
+            f"loss={self.loss:.6g}{stat}, message={self.message!r})"
+        )
+
+
+def _as_loss(problem):
+    if isinstance(problem, Problem):
+        return problem.loss
+    if not callable(problem):
+        raise ValueError(
+            f"problem must be a fit.Problem or a callable params -> scalar loss, got "
+            f"{type(problem).__name__}"
+        )
+    return problem
+
+
+def _checked_start(params0):
+    """``params0`` as float arrays; ``ValueError`` naming a leaf that is not a finite number."""
+    leaves = jax.tree_util.tree_leaves_with_path(params0)
+    if not leaves:
+        raise ValueError("params0 holds no parameters (an empty pytree)")
+    for path, leaf in leaves:
+        name = "params0" + jax.tree_util.keystr(path)
+        try:
+            a = np.asarray(leaf)
+        except Exception:  # noqa: BLE001 - any object numpy cannot read
+            a = np.asarray(None)
+        if not (np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)):
+            raise ValueError(f"{name} must be a real number or array, got {leaf!r}")
+        bad = ~np.isfinite(a.astype(float))
+        if bad.any():
+            where = np.argwhere(bad)[0].tolist() if a.ndim else []
+            raise ValueError(
+                f"{name} has NaN or inf{f' at index {where}' if where else ''}: start from "
+                "finite values"
+            )
+    dtype = jnp.result_type(float)
+    return jax.tree_util.tree_map(lambda x: jnp.asarray(x, dtype=dtype), params0)
 
 
 def _inf_norm(tree) -> jax.Array:
@@ -91,41 +198,66 @@ def _lbfgs_step(f, optimizer, p, s):
     return optax.apply_updates(p, updates), s, value, grad
 
 
-def _gauss_newton(problem, p):
-    """``(½ Σ r², gradient Jᵀr, Gauss–Newton matrix JᵀJ)`` at ``p`` (flat), forward mode.
+class _LMState(NamedTuple):
+    mu: float
+    nu: float
+    scale: jax.Array | None  # running maximum of diag(JᵀJ)
+    cache: tuple | None  # (r, J) at the current point
+    stalled: bool = False
+    gn_decrease: float = 0.0
 
-    The compiled residual Jacobian is the one :func:`jrigid.fit.laplace` uses, so the
-    error bars after an ``"lm"`` fit cost no second compilation.
+
+@jax.jit
+def _normal_equations(r, jac, scale):
+    """``(½ Σ r², Jᵀr, JᵀJ, max(scale, diag JᵀJ))``, the scale floored above zero."""
+    gn = jac.T @ jac
+    d = jnp.diagonal(gn) if scale is None else jnp.maximum(scale, jnp.diagonal(gn))
+    top = jnp.max(d)
+    d = jnp.where(d > 1e-12 * top, d, jnp.where(top > 0, 1e-12 * top, 1.0))
+    return 0.5 * jnp.sum(r * r), jac.T @ r, gn, d
+
+
+@jax.jit
+def _lm_trial(flat, grad, gn, scale, mu):
+    """``flat + h`` with ``(JᵀJ + μ D) h = −Jᵀr``, and the decrease the linear model predicts."""
+    h = jnp.linalg.solve(gn + jnp.diag(mu * scale), -grad)
+    predicted = -(grad @ h) - 0.5 * (h @ gn @ h)
+    return flat + h, predicted
+
+
+@jax.jit
+def _gauss_newton_decrease(r, jac):
+    """Decrease of ``½ Σ r²`` the undamped Gauss–Newton step promises, ``½ ‖P_J r‖²``."""
+    h = jnp.linalg.lstsq(jac, -r)[0]
+    return 0.5 * (jnp.sum(r * r) - jnp.sum((r + jac @ h) ** 2))
+
+
+def _lm_step(problem, _optimizer, p, s: _LMState):
+    """One accepted Levenberg–Marquardt step (gain-ratio test, MINPACK scaling).
+
+    Returns ``p`` unchanged with ``stalled=True`` when no damping up to ``μ = 1e16`` is
+    accepted.
     """
-    r, jac = _residuals_and_jacobian(problem, p)
-    return 0.5 * jnp.sum(r * r), jac.T @ r, jac.T @ jac
-
-
-@eqx.filter_jit
-def _lm_trial(p, grad, gn, lam):
-    """``p + δ`` with ``(JᵀJ + λ diag(JᵀJ)) δ = −Jᵀr`` (Marquardt's scaling)."""
     flat, unravel = ravel_pytree(p)
-    d = jnp.diag(gn)
-    damped = gn + jnp.diag(lam * jnp.where(d > 0, d, 1.0))
-    return unravel(flat + jnp.linalg.solve(damped, -grad))
-
-
-def _lm_step(problem, _optimizer, p, s):
-    """One accepted Levenberg–Marquardt step (λ raised until the loss decreases).
-
-    ``s = (λ, (value, grad, JᵀJ) at p or None)``. Returns ``p`` unchanged when no damping
-    up to ``1e16`` decreases the loss (a minimum to rounding: the ``ftol`` rule stops).
-    """
-    lam, cache = s
-    value, grad, gn = _gauss_newton(problem, p) if cache is None else cache
-    _, unravel = ravel_pytree(p)
-    while lam < 1e16:
-        trial = _lm_trial(p, grad, gn, lam)
-        new = _gauss_newton(problem, trial)
-        if bool(new[0] < value):
-            return trial, (max(lam / 3.0, 1e-12), new), value, unravel(grad)
-        lam *= 4.0
-    return p, (lam, (value, grad, gn)), value, unravel(grad)
+    r, jac = residuals_and_jacobian(problem, p) if s.cache is None else s.cache
+    value, grad, gn, scale = _normal_equations(r, jac, s.scale)
+    mu, nu = s.mu, s.nu
+    value_f = float(value)
+    while mu <= _MU_MAX:
+        trial, predicted = _lm_trial(flat, grad, gn, scale, jnp.asarray(mu, flat.dtype))
+        predicted = float(predicted)
+        if np.isfinite(predicted) and predicted > 0:
+            r_new, jac_new = residuals_and_jacobian(problem, unravel(trial))
+            new_value = 0.5 * float(jnp.sum(r_new * r_new))
+            rho = (value_f - new_value) / predicted
+            if np.isfinite(new_value) and rho > 1e-4:
+                mu = max(mu * max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), 1e-15)
+                state = _LMState(mu, 2.0, scale, (r_new, jac_new))
+                return unravel(trial), state, value, unravel(grad)
+        mu *= nu
+        nu *= 2.0
+    decrease = float(_gauss_newton_decrease(r, jac))
+    return p, _LMState(mu, nu, scale, (r, jac), True, decrease), value, unravel(grad)
 
 
 @eqx.filter_jit
@@ -136,7 +268,7 @@ def _plain_step(f, optimizer, p, s):
 
 
 def fit(
-    objective,
+    problem,
     params0,
     *,
     method: str = "lbfgs",
@@ -147,19 +279,31 @@ def fit(
     optimizer: optax.GradientTransformation | None = None,
     progress: bool | None = None,
     record_params: bool = True,
+    on_bad_fit: str = "warn",
+    chi2_alpha: float = DEFAULT_CHI2_ALPHA,
+    edge_tol: float = DEFAULT_EDGE_TOL,
+    rcond: float | None = None,
+    horizons: Sequence[float] | None = None,
 ) -> FitResult:
-    """Minimise ``objective(params)`` from ``params0``.
+    """Minimise a problem's loss from ``params0``, then judge the result.
 
     Args:
-        objective: a :class:`~jrigid.fit.problem.Problem` (its :meth:`~Problem.loss`) or
-            any differentiable ``params -> ()`` function.
-        params0: starting pytree of float arrays (raw, unconstrained parameters; see
-            :mod:`jrigid.fit.params`).
+        problem: a :class:`~jrigid.fit.problem.Problem` (its :meth:`~Problem.loss`
+            ``½ Σ r²`` is minimised, and the result is judged on its residuals), or any
+            differentiable ``params -> ()`` loss function (judged only on the
+            optimiser's stop).
+        params0: starting pytree of finite real arrays (raw, unconstrained parameters;
+            see :mod:`jrigid.fit.params`). Start where the model is not degenerate: a
+            body that is neither spherical nor symmetric (e.g. the moments of a box of
+            roughly the right proportions, :func:`jrigid.inertia.box`, through
+            :func:`~jrigid.fit.moment_ratios_raw`) and the initial spin from the data
+            (the first gyroscope sample).
         method: ``"lbfgs"`` (``optax.lbfgs`` with zoom line search; default), ``"adam"``,
-            or ``"lm"`` (Levenberg–Marquardt with forward-mode Jacobians; ``objective``
+            or ``"lm"`` (Levenberg–Marquardt with forward-mode Jacobians; ``problem``
             must be a :class:`~jrigid.fit.problem.Problem`).
         learning_rate: Adam's step (default ``1e-2``); for L-BFGS ``None`` lets the line
-            search choose; for ``"lm"`` the initial damping λ (default ``1e-3``).
+            search choose; for ``"lm"`` the initial damping μ relative to ``diag(JᵀJ)``
+            (default ``1e-3``).
         max_iter: largest number of optimiser steps.
         gtol: stop when ``‖∇f‖_∞ ≤ gtol``.
         ftol: stop when the relative decrease falls below ``ftol`` (see module docstring).
@@ -168,89 +312,102 @@ def fit(
         progress: show a ``tqdm`` bar; default: when ``max_iter ≥ 100`` and stderr is a
             terminal.
         record_params: keep every iterate in ``history["params"]``.
+        on_bad_fit: what to do when the verdict is a failure: ``"warn"`` (default; a
+            :class:`~jrigid.fit.FitWarning` with the message), ``"raise"`` (a
+            :class:`~jrigid.fit.FitError` holding the result), or ``"ignore"``.
+        chi2_alpha: χ² tail probability below which the fit fails (default ``1e-6``;
+            ``0`` disables the test). See :mod:`jrigid.fit.verdict`.
+        edge_tol: smallest relative triangle gap of the fitted body (default ``1e-5``;
+            ``0`` disables the check).
+        rcond: rank cut-off of the column-scaled Jacobian, as in :func:`~jrigid.fit.laplace`.
+        horizons: increasing fractions of the record, e.g. ``(0.25, 0.5)``: fit the
+            observations up to ``t0 + h (t_end − t0)`` for each ``h`` in turn
+            (:meth:`Problem.until <jrigid.fit.Problem.until>`), each from the previous
+            optimum, then the whole record. The loss of a long record of rotation has
+            many local optima, and from a far start plain descent often ends in one, on
+            the edge of the physical region (see the README); a short record's loss is
+            close to quadratic over a wider region. ``max_iter`` applies to each stage;
+            ``history`` and ``n_iter`` cover all of them.
 
     Returns:
-        :class:`FitResult`.
+        :class:`FitResult`: ``success`` and ``message`` give the verdict; ``chi2``,
+        ``dof``, ``chi2_dof``, ``cov``/``sigma``/``laplace`` the statistics at the end
+        point (for a :class:`~jrigid.fit.Problem`).
 
     Raises:
-        ValueError: unknown method, non-positive ``max_iter``, a non-finite loss at
-            ``params0``, or ``"lm"`` with an objective that is not a ``Problem``.
+        ValueError: unknown method or ``on_bad_fit``, non-positive ``max_iter``, a
+            ``params0`` that is empty or holds NaN/inf or non-numbers, a non-finite loss
+            at ``params0``, or ``"lm"`` with an objective that is not a ``Problem``.
+        FitError: ``on_bad_fit="raise"`` and the fit failed.
+
+    Warns:
+        FitWarning: ``on_bad_fit="warn"`` and the fit failed; the message names the causes.
     """
-    f = _as_loss(objective)
-    if not isinstance(max_iter, int) or max_iter < 1:
+    f = _as_loss(problem)
+    if not isinstance(max_iter, int) or isinstance(max_iter, bool) or max_iter < 1:
         raise ValueError(f"max_iter must be a positive int, got {max_iter!r}")
-    params = jax.tree_util.tree_map(lambda x: jnp.asarray(x, dtype=jnp.result_type(float)), params0)
     if optimizer is None and method not in ("lbfgs", "adam", "lm"):
         raise ValueError(f"method must be 'lbfgs', 'adam' or 'lm', got {method!r}")
+    if on_bad_fit not in _ON_BAD_FIT:
+        raise ValueError(f"on_bad_fit must be one of {_ON_BAD_FIT}, got {on_bad_fit!r}")
+    if not 0.0 <= chi2_alpha < 1.0:
+        raise ValueError(f"chi2_alpha must be in [0, 1), got {chi2_alpha!r}")
+    if not edge_tol >= 0.0:
+        raise ValueError(f"edge_tol must be >= 0, got {edge_tol!r}")
+    params = _checked_start(params0)
+    is_problem = isinstance(problem, Problem)
     marquardt = optimizer is None and method == "lm"
     linesearch = optimizer is None and method == "lbfgs"
+    mu0 = 1e-3 if learning_rate is None else float(learning_rate)
     if marquardt:
-        if not isinstance(objective, Problem):
+        if not is_problem:
             raise ValueError("method='lm' needs a Problem (it fits the residuals)")
-        f, state = objective, (1e-3 if learning_rate is None else float(learning_rate), None)
+        if not mu0 > 0:
+            raise ValueError(f"learning_rate (the initial damping) must be > 0, got {mu0}")
     else:
         optimizer = _optimizer(method, learning_rate) if optimizer is None else optimizer
-        # strip weak types, else the second step recompiles
-        state = jax.tree_util.tree_map(
-            lambda x: jnp.asarray(x, dtype=jnp.asarray(x).dtype), optimizer.init(params)
-        )
+    stages = _stages(problem, horizons) if horizons is not None else [problem]
 
     # One compiled function per fit: it returns the value and gradient at ``p`` and the
     # next iterate; the loop checks the stopping rules on the former before accepting
     # the latter.
     # ``f`` is an argument (a pytree when it is a Problem's bound method), so problems
-    # that differ only in their data reuse the compiled step.
+    # that differ only in their data (or their horizon) reuse the compiled step.
     step = _lm_step if marquardt else _lbfgs_step if linesearch else _plain_step
+    patience = 1 if linesearch or marquardt else 5
 
     show = (max_iter >= 100 and sys.stderr.isatty()) if progress is None else bool(progress)
     bar = None
     if show:
         from tqdm.auto import tqdm
 
-        bar = tqdm(total=max_iter, desc=f"fit ({method})", leave=False)
+        bar = tqdm(total=max_iter * len(stages), desc=f"fit ({method})", leave=False)
 
     history: dict[str, list] = {"loss": [], "grad_norm": []}
     if record_params:
         history["params"] = []
-    patience = 1 if linesearch or marquardt else 5
-    small = 0
-    reason = "max_iter"
     n_iter = 0
     try:
-        while True:
-            new_params, new_state, value, grad = step(f, optimizer, params, state)
-            value_f = float(value)
-            gnorm = float(_inf_norm(grad))
-            if n_iter == 0 and not np.isfinite(value_f):
-                raise ValueError(f"the loss at params0 is not finite ({value_f})")
-            history["loss"].append(value_f)
-            history["grad_norm"].append(gnorm)
-            if record_params:
-                history["params"].append(jax.device_get(params))
-            if bar is not None:
-                bar.set_postfix(loss=f"{value_f:.4g}", grad=f"{gnorm:.2g}")
-            if not (np.isfinite(value_f) and np.isfinite(gnorm)):
-                reason = "nonfinite"
-                break
-            if gnorm <= gtol:
-                reason = "gtol"
-                break
-            if n_iter > 0:
-                prev = history["loss"][-2]
-                small = small + 1 if abs(prev - value_f) <= ftol * max(1.0, abs(value_f)) else 0
-                if small >= patience:
-                    reason = "ftol"
-                    break
-            if n_iter >= max_iter:
-                break
-            params, state = new_params, new_state
-            n_iter += 1
-            if bar is not None:
-                bar.update(1)
+        for stage in stages:
+            if marquardt:
+                f, state = stage, _LMState(mu0, 2.0, None, None)
+            else:
+                f = _as_loss(stage)
+                # strip weak types, else the second step recompiles
+                state = jax.tree_util.tree_map(
+                    lambda x: jnp.asarray(x, dtype=jnp.asarray(x).dtype), optimizer.init(params)
+                )
+            params, state, reason, steps = _minimise(
+                step, f, optimizer, params, state, history, bar,
+                marquardt=marquardt, patience=patience, max_iter=max_iter, gtol=gtol,
+                ftol=ftol, record_params=record_params, first=n_iter == 0 and stage is stages[0],
+            )  # fmt: skip
+            n_iter += steps
     finally:
         if bar is not None:
             bar.close()
-    return FitResult(
+
+    result = FitResult(
         params=params,
         loss=history["loss"][-1],
         grad_norm=history["grad_norm"][-1],
@@ -259,3 +416,124 @@ def fit(
         reason=reason,
         history=history,
     )
+    _judge(result, problem if is_problem else None, state if marquardt else None,
+           max_iter=max_iter, chi2_alpha=chi2_alpha, edge_tol=edge_tol, rcond=rcond)  # fmt: skip
+    if not result.success:
+        if on_bad_fit == "raise":
+            raise FitError(result.message, result)
+        if on_bad_fit == "warn":
+            warnings.warn(result.message, FitWarning, stacklevel=2)
+    return result
+
+
+def _stages(problem, horizons) -> list:
+    """The problems of a horizon schedule: restricted to growing records, then whole."""
+    if not isinstance(problem, Problem):
+        raise ValueError("horizons needs a Problem (it shortens the observation record)")
+    fractions = [float(h) for h in horizons]
+    if not all(0.0 < h <= 1.0 for h in fractions) or any(
+        b <= a for a, b in zip(fractions, fractions[1:], strict=False)
+    ):
+        raise ValueError(
+            f"horizons must be increasing fractions of the record in (0, 1], got {horizons!r}"
+        )
+    t0, t1 = float(problem.t0), float(problem.ts[-1])
+    stages = [problem.until(t0 + h * (t1 - t0)) for h in fractions if h < 1.0]
+    return [*stages, problem]
+
+
+def _minimise(step, f, optimizer, params, state, history, bar, *, marquardt, patience,
+              max_iter, gtol, ftol, record_params, first):  # fmt: skip
+    """The optimiser loop of one stage: ``(params, state, reason, steps)``."""
+    small = 0
+    reason = "max_iter"
+    n_iter = 0
+    while True:
+        new_params, new_state, value, grad = step(f, optimizer, params, state)
+        value_f = float(value)
+        gnorm = float(_inf_norm(grad))
+        if first and n_iter == 0 and not np.isfinite(value_f):
+            raise ValueError(f"the loss at params0 is not finite ({value_f})")
+        history["loss"].append(value_f)
+        history["grad_norm"].append(gnorm)
+        if record_params:
+            history["params"].append(jax.device_get(params))
+        if bar is not None:
+            bar.set_postfix(loss=f"{value_f:.4g}", grad=f"{gnorm:.2g}")
+        if not (np.isfinite(value_f) and np.isfinite(gnorm)):
+            reason = "nonfinite"
+            break
+        if gnorm <= gtol:
+            reason = "gtol"
+            break
+        if n_iter > 0:
+            prev = history["loss"][-2]
+            small = small + 1 if abs(prev - value_f) <= ftol * max(1.0, abs(value_f)) else 0
+            if small >= patience:
+                reason = "ftol"
+                break
+        if marquardt and new_state.stalled:
+            state = new_state
+            small_step = new_state.gn_decrease <= ftol * max(1.0, abs(value_f))
+            reason = "ftol" if small_step else "stalled"
+            break
+        if n_iter >= max_iter:
+            break
+        params, state = new_params, new_state
+        n_iter += 1
+        if bar is not None:
+            bar.update(1)
+    return params, state, reason, n_iter
+
+
+def _judge(result: FitResult, problem, lm_state, *, max_iter, chi2_alpha, edge_tol, rcond):
+    """Fill the verdict and the statistics of ``result`` in place."""
+    params = result.params
+    finite = all(bool(jnp.all(jnp.isfinite(x))) for x in jax.tree_util.tree_leaves(params))
+    lap = step_length = moments = None
+    sigma_given = True
+    if problem is not None and finite:
+        sigma_given = problem.sigma_given
+        if lm_state is not None and lm_state.cache is not None:
+            r, jac = lm_state.cache
+        else:
+            r, jac = residuals_and_jacobian(problem, params)
+        result.residuals, result.jac = r, jac
+        size = problem.active_size
+        try:
+            lap = Laplace.from_jacobian(params, r, jac, rcond=rcond, size=size)
+        except ValueError:
+            lap = None
+        if lap is not None:
+            scale = 1.0
+            if not sigma_given and lap.dof > 0:
+                scale = lap.chi2 / lap.dof
+                lap = Laplace.from_jacobian(
+                    params, r, jac, rcond=rcond, scale_by_chi2=True, size=size
+                )
+            g = np.asarray(jac).T @ np.asarray(r)
+            c0 = np.asarray(lap.cov_pinv) / scale
+            step_length = float(np.sqrt(max(g @ c0 @ g, 0.0) / scale)) if scale > 0 else 0.0
+            result.chi2, result.dof = lap.chi2, lap.dof
+            result.chi2_dof = lap.chi2 / lap.dof if lap.dof > 0 else None
+        result.laplace = lap
+        try:
+            moments = problem.moments(params)
+        except ValueError:
+            moments = None
+    result.sigma_given = sigma_given if problem is not None else None
+    verdict = assess(
+        reason=result.reason,
+        n_iter=result.n_iter,
+        max_iter=max_iter,
+        laplace=lap,
+        step_length=step_length,
+        sigma_given=sigma_given,
+        moments=None if moments is None else np.asarray(moments),
+        chi2_alpha=chi2_alpha,
+        edge_tol=edge_tol,
+    )
+    result.success = bool(verdict.success and result.converged)
+    result.causes = verdict.causes
+    result.message = verdict.message
+    result.p_value = verdict.p_value

@@ -45,8 +45,9 @@ unless the record spans many flips).
 The observation classes (:class:`WobbleRatio`, :class:`PrecessionRate`,
 :class:`SpinRate`, :class:`NutationRate`, :class:`Tilt`, :class:`FlipPeriod`) hold the
 record's times ``ts`` (the window the feature was measured on; the closed form uses
-only its first instant), the observed ``value`` and ``sigma``; their residual is
-``(f̂ − value)/σ`` (one number). The closed form needs a model that predicts the
+only its first instant), the observed ``value`` and ``sigma`` (``None``: unknown, unit
+weight, as for :mod:`jrigid.fit.observations`); their residual is ``(f̂ − value)/σ``
+(one number). The closed form needs a model that predicts the
 moments (:class:`~jrigid.fit.Exact`, or :class:`~jrigid.fit.Simulated` of a torque-free
 scene); otherwise ``ValueError``. Inside ``jit`` the closed form checks with
 ``equinox.error_if`` that the requested axis is the encircled one.
@@ -65,7 +66,7 @@ from jax.typing import ArrayLike
 
 from jrigid import exact
 from jrigid import quaternion as quat
-from jrigid.fit.observations import Prediction, _Observation, _times
+from jrigid.fit.observations import Observation, Prediction, sample_times
 
 __all__ = [
     "FlipPeriod",
@@ -293,7 +294,7 @@ def _scalar(x, name: str) -> jax.Array:
     return jnp.asarray(a.reshape(1), dtype=jnp.result_type(float))
 
 
-class _Feature(_Observation):
+class _Feature(Observation):
     """One derived number measured on a record; residual ``(f̂ − value)/σ``."""
 
     ts: jax.Array
@@ -307,7 +308,7 @@ class _Feature(_Observation):
         self,
         ts: ArrayLike,
         value: ArrayLike,
-        sigma: ArrayLike = 1.0,
+        sigma: ArrayLike | None = None,
         *,
         axis: int = 2,
         method: str = "closed",
@@ -317,14 +318,15 @@ class _Feature(_Observation):
             raise ValueError(f"method must be one of {_METHODS}, got {method!r}")
         if axis not in (0, 1, 2):
             raise ValueError(f"axis must be 0, 1 or 2, got {axis!r}")
-        self.ts = _times(ts)
+        self.ts = sample_times(ts)
         if method == "trajectory" and self.ts.shape[0] < _MIN_TRAJECTORY_SAMPLES:
             raise ValueError(
                 f"too few samples for a trajectory estimate: need at least "
                 f"{_MIN_TRAJECTORY_SAMPLES} times, got {self.ts.shape[0]}"
             )
         self.value = _scalar(value, "value")
-        self.sigma = _scalar(sigma, "sigma")
+        self.sigma_given = sigma is not None
+        self.sigma = _scalar(1.0 if sigma is None else sigma, "sigma")
         if not float(self.sigma[0]) > 0:
             raise ValueError(f"sigma must be > 0, got {float(self.sigma[0])}")
         if about is None:
@@ -389,6 +391,10 @@ class _Feature(_Observation):
     def predicted(self, pred: Prediction) -> jax.Array:
         """``()`` the feature's predicted value."""
         raise NotImplementedError
+
+    def in_window(self, t_end: jax.Array) -> jax.Array:
+        """``(1,)`` whether the feature's record ends by ``t_end``."""
+        return jnp.reshape(self.ts[-1] <= t_end, (1,))
 
     def residuals(self, pred: Prediction) -> jax.Array:
         """``(1,)`` whitened residual ``(f̂ − value)/σ``."""

@@ -18,6 +18,11 @@ Construction validates the data and raises ``ValueError`` naming the problem (wr
 shapes, NaN/inf, fewer than ``2`` samples, times not strictly increasing, a
 non-positive ``sigma``, a zero quaternion or direction). Construct observations outside
 ``jit``.
+
+``sigma`` is the noise's standard deviation. Left out (``None``), the residuals are
+unweighted (``σ = 1``) and the observation records that its noise level is unknown
+(:attr:`Observation.sigma_given` is ``False``): :func:`jrigid.fit.fit` then does not
+test χ², and :func:`jrigid.fit.laplace` scales the covariance by ``χ²/dof``.
 """
 
 from __future__ import annotations
@@ -35,11 +40,14 @@ from jrigid import quaternion as quat
 __all__ = [
     "AxisDirections",
     "Gyroscope",
+    "Observation",
     "Orientations",
     "Prediction",
     "axis_loss",
     "gyroscope_loss",
     "orientation_loss",
+    "sample_times",
+    "sigma_array",
 ]
 
 _FRAMES = ("principal", "reference", "space")
@@ -128,7 +136,12 @@ def axis_loss(
 # --------------------------------------------------------------------------- validation
 
 
-def _times(ts) -> jax.Array:
+def sample_times(ts) -> jax.Array:
+    """Validated sample times: ``(T,)`` finite, strictly increasing, ``T ≥ 2``.
+
+    Raises:
+        ValueError: naming what is wrong.
+    """
     ts_np = np.asarray(ts, dtype=float)
     if ts_np.ndim != 1:
         raise ValueError(f"ts must be a 1-D array of sample times, got shape {ts_np.shape}")
@@ -160,16 +173,38 @@ def _data(x, ts, width: int, name: str) -> jax.Array:
     return jnp.asarray(x_np, dtype=jnp.result_type(float))
 
 
-def _sigma(sigma, ts, width: int) -> jax.Array:
-    s = np.asarray(sigma, dtype=float)
+def sigma_array(sigma, n: int, width: int) -> jax.Array:
+    """Validated noise levels ``(n, width)`` from ``sigma`` (``None`` means ``1``).
+
+    Args:
+        sigma: a scalar, ``(width,)``, ``(n, 1)`` or ``(n, width)``; finite and > 0.
+        n: number of samples; width: residual components per sample.
+
+    Raises:
+        ValueError: a shape that does not broadcast, or an entry that is not finite and
+            positive (naming the first such sample).
+    """
+    if sigma is None:
+        return jnp.ones((n, width), dtype=jnp.result_type(float))
     try:
-        s = np.broadcast_to(s, (ts.shape[0], width))
+        s = np.asarray(sigma, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"sigma must be a number or an array of numbers, got {sigma!r}") from None
+    try:
+        s = np.broadcast_to(s, (n, width))
     except ValueError:
+        hint = (
+            f"; for one σ per sample pass sigma[:, None] of shape ({n}, 1)"
+            if s.shape == (n,)
+            else ""
+        )
         raise ValueError(
-            f"sigma must broadcast to (T, {width}) = ({ts.shape[0]}, {width}), got shape {s.shape}"
+            f"sigma must broadcast to (T, {width}) = ({n}, {width}), got shape {s.shape}{hint}"
         ) from None
-    if not np.all(np.isfinite(s) & (s > 0)):
-        raise ValueError("sigma must be finite and > 0")
+    bad = ~(np.isfinite(s) & (s > 0))
+    if bad.any():
+        i, k = (int(x) for x in np.argwhere(bad)[0])
+        raise ValueError(f"sigma must be finite and > 0, got {s[i, k]} at sample {i}")
     return jnp.asarray(s, dtype=jnp.result_type(float))
 
 
@@ -185,7 +220,15 @@ def _unit_rows(x: jax.Array, name: str) -> jax.Array:
 # --------------------------------------------------------------------------- observations
 
 
-class _Observation(eqx.Module):
+class Observation(eqx.Module):
+    """Base class of everything a :class:`~jrigid.fit.Problem` compares with a prediction.
+
+    A subclass holds ``ts (T,)`` and implements :meth:`residuals` and :attr:`size`; it
+    sets ``sigma_given`` (whether its noise level was stated).
+    """
+
+    sigma_given: bool = eqx.field(static=True, default=True, kw_only=True)
+
     def loss(self, pred: Prediction) -> jax.Array:
         """``()`` ``½ Σ r²``, the Gaussian negative log-likelihood up to a constant."""
         r = self.residuals(pred)
@@ -197,16 +240,26 @@ class _Observation(eqx.Module):
         raise NotImplementedError
 
     def residuals(self, pred: Prediction) -> jax.Array:
+        """``(size,)`` whitened residuals."""
         raise NotImplementedError
 
+    def in_window(self, t_end: jax.Array) -> jax.Array:
+        """``(size,)`` which residuals belong to samples at times ``≤ t_end``.
 
-class Gyroscope(_Observation):
+        This default suits residuals laid out sample by sample, ``size / T`` per sample.
+        """
+        per = self.size // self.ts.shape[0]
+        return jnp.repeat(self.ts <= t_end, per, total_repeat_length=self.size)
+
+
+class Gyroscope(Observation):
     """A gyroscope record: angular velocity samples with Gaussian noise.
 
     Attributes:
         ts: ``(T,)`` strictly increasing times.
         omega: ``(T, 3)`` measured angular velocity.
-        sigma: ``(T, 3)`` noise standard deviation (a scalar or ``(3,)`` broadcasts).
+        sigma: ``(T, 3)`` noise standard deviation (a scalar, ``(3,)`` or ``(T, 1)``
+            broadcasts; ``None``: unknown, unit weights).
         frame: static, the frame of ``omega``: ``"principal"`` (default; the body's
             principal axes), ``"reference"`` (the frame the body's tensor was given in,
             ``RigidBody.frame``) or ``"space"``.
@@ -218,13 +271,19 @@ class Gyroscope(_Observation):
     frame: str = eqx.field(static=True)
 
     def __init__(
-        self, ts: ArrayLike, omega: ArrayLike, sigma: ArrayLike = 1.0, *, frame: str = "principal"
+        self,
+        ts: ArrayLike,
+        omega: ArrayLike,
+        sigma: ArrayLike | None = None,
+        *,
+        frame: str = "principal",
     ):
         if frame not in _FRAMES:
             raise ValueError(f"frame must be one of {_FRAMES}, got {frame!r}")
-        self.ts = _times(ts)
+        self.ts = sample_times(ts)
         self.omega = _data(omega, self.ts, 3, "omega")
-        self.sigma = _sigma(sigma, self.ts, 3)
+        self.sigma = sigma_array(sigma, self.ts.shape[0], 3)
+        self.sigma_given = sigma is not None
         self.frame = frame
 
     @property
@@ -248,13 +307,14 @@ class Gyroscope(_Observation):
         return ((self.predicted(pred) - self.omega) / self.sigma).reshape(-1)
 
 
-class Orientations(_Observation):
+class Orientations(Observation):
     """Orientation samples (quaternions, any sign, normalised here).
 
     Attributes:
         ts: ``(T,)`` times.
         q: ``(T, 4)`` measured orientations, body → space.
-        sigma: ``(T, 3)`` angle noise in radians about each axis (scalar broadcasts).
+        sigma: ``(T, 3)`` angle noise in radians about each axis (scalar broadcasts;
+            ``None``: unknown, unit weights).
         frame: static, ``"principal"`` (default) or ``"reference"``: whose orientation
             ``q`` is (the reference frame's is ``q_principal ⊗ frame*``).
     """
@@ -265,13 +325,19 @@ class Orientations(_Observation):
     frame: str = eqx.field(static=True)
 
     def __init__(
-        self, ts: ArrayLike, q: ArrayLike, sigma: ArrayLike = 1.0, *, frame: str = "principal"
+        self,
+        ts: ArrayLike,
+        q: ArrayLike,
+        sigma: ArrayLike | None = None,
+        *,
+        frame: str = "principal",
     ):
         if frame not in _FRAMES[:2]:
             raise ValueError(f"frame must be 'principal' or 'reference', got {frame!r}")
-        self.ts = _times(ts)
+        self.ts = sample_times(ts)
         self.q = _unit_rows(_data(q, self.ts, 4, "q"), "q")
-        self.sigma = _sigma(sigma, self.ts, 3)
+        self.sigma = sigma_array(sigma, self.ts.shape[0], 3)
+        self.sigma_given = sigma is not None
         self.frame = frame
 
     @property
@@ -291,13 +357,13 @@ class Orientations(_Observation):
         return (_orientation_residual(self.predicted(pred), self.q) / self.sigma).reshape(-1)
 
 
-class AxisDirections(_Observation):
+class AxisDirections(Observation):
     """Directions in space of one body-fixed axis (a camera tracking a mark).
 
     Attributes:
         ts: ``(T,)`` times.
         directions: ``(T, 3)`` measured directions in space (normalised here).
-        sigma: ``(T, 3)`` noise per component (scalar broadcasts).
+        sigma: ``(T, 3)`` noise per component (scalar broadcasts; ``None``: unknown).
         axis: ``(3,)`` the marked axis in principal body coordinates (an int ``i`` means
             principal axis ``i + 1``); normalised.
     """
@@ -307,10 +373,13 @@ class AxisDirections(_Observation):
     sigma: jax.Array
     axis: jax.Array
 
-    def __init__(self, ts: ArrayLike, directions: ArrayLike, sigma: ArrayLike = 1.0, *, axis=2):
-        self.ts = _times(ts)
+    def __init__(
+        self, ts: ArrayLike, directions: ArrayLike, sigma: ArrayLike | None = None, *, axis=2
+    ):
+        self.ts = sample_times(ts)
         self.directions = _unit_rows(_data(directions, self.ts, 3, "directions"), "directions")
-        self.sigma = _sigma(sigma, self.ts, 3)
+        self.sigma = sigma_array(sigma, self.ts.shape[0], 3)
+        self.sigma_given = sigma is not None
         if isinstance(axis, int):
             if axis not in (0, 1, 2):
                 raise ValueError(f"axis must be 0, 1, 2 or a 3-vector, got {axis}")

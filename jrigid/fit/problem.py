@@ -30,7 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jrigid import exact
-from jrigid.fit.observations import Prediction, _Observation
+from jrigid.fit.observations import Observation, Prediction
 from jrigid.integrate import simulate
 from jrigid.scene import FreeRotation, Scene
 from jrigid.state import State
@@ -154,6 +154,9 @@ class Problem(eqx.Module):
         t0: the time of the initial state (default: the earliest observation time).
             Every observation time must be ``≥ t0``.
 
+    :meth:`until` gives the same problem restricted to the observations up to a time
+    (``horizon``; ``inf`` here): the residuals after it are zero.
+
     Raises:
         ValueError: no observations, an observation that is not one, or observation
             times before ``t0``.
@@ -164,15 +167,16 @@ class Problem(eqx.Module):
     t0: jax.Array
     ts: jax.Array
     index: tuple
+    horizon: jax.Array
 
-    def __init__(self, model, observations: _Observation | Sequence[_Observation], *, t0=None):
-        if isinstance(observations, _Observation):
+    def __init__(self, model, observations: Observation | Sequence[Observation], *, t0=None):
+        if isinstance(observations, Observation):
             observations = (observations,)
         observations = tuple(observations)
         if not observations:
             raise ValueError("Problem needs at least one observation")
         for obs in observations:
-            if not isinstance(obs, _Observation):
+            if not isinstance(obs, Observation):
                 raise ValueError(
                     "observations must be Gyroscope, Orientations, AxisDirections or a "
                     f"feature of jrigid.fit.features, got {obs!r}"
@@ -201,18 +205,66 @@ class Problem(eqx.Module):
         self.index = tuple(
             jnp.asarray(np.searchsorted(grid, np.asarray(o.ts))) for o in observations
         )
+        self.horizon = jnp.asarray(np.inf, dtype=jnp.result_type(float))
 
     @property
     def size(self) -> int:
         """Total number of residuals."""
         return sum(o.size for o in self.observations)
 
+    @property
+    def active_size(self) -> int:
+        """Number of residuals up to :attr:`horizon` (all of them unless :meth:`until`)."""
+        return int(sum(np.sum(np.asarray(o.in_window(self.horizon))) for o in self.observations))
+
+    def until(self, t_end) -> Problem:
+        """The same problem with only the observations up to ``t_end``.
+
+        The residuals of later samples (and of features whose record ends later) are
+        zero; every array keeps its shape, so a compiled fit is reused. A fit from a far
+        start goes wrong less often on a short record, whose loss has fewer local optima:
+        fit a short record first and lengthen it (``fit(..., horizons=...)``).
+
+        Args:
+            t_end: ``()`` the last time kept (finite, ``≥ t0``).
+
+        Raises:
+            ValueError: a non-finite ``t_end``, or one that keeps no residual.
+        """
+        t = float(t_end)
+        if not np.isfinite(t):
+            raise ValueError(f"t_end must be finite, got {t}")
+        out = eqx.tree_at(lambda p: p.horizon, self, jnp.asarray(t, self.horizon.dtype))
+        if out.active_size == 0:
+            raise ValueError(
+                f"no observation up to t_end={t:.6g} (the first sample is at "
+                f"{float(self.ts[1] if self.ts.shape[0] > 1 else self.ts[0]):.6g})"
+            )
+        return out
+
+    @property
+    def sigma_given(self) -> bool:
+        """Whether every observation was given its noise level ``sigma``."""
+        return all(getattr(o, "sigma_given", True) for o in self.observations)
+
+    def moments(self, theta) -> jax.Array | None:
+        """``(3,)`` principal moments of the body the model builds from ``theta``.
+
+        ``None`` when the model has no ``build`` (a plain callable model).
+        """
+        build = getattr(self.model, "build", None)
+        if build is None:
+            return None
+        scene, _ = _built(build, theta)
+        return scene.body.moments
+
     def predict(self, theta, *, forward_mode: bool = False) -> Prediction:
         """The model's :class:`Prediction` on the union time grid ``self.ts``."""
         return self.model(theta, self.ts, forward_mode=forward_mode)
 
     def residuals(self, theta, *, forward_mode: bool = False) -> jax.Array:
-        """``(N,)`` whitened residuals of all observations, concatenated."""
+        """``(N,)`` whitened residuals of all observations, concatenated (zero after
+        :attr:`horizon`)."""
         pred = self.predict(theta, forward_mode=forward_mode)
         closed = any(getattr(o, "method", None) == "closed" for o in self.observations)
         if closed and pred.constants is None and pred.moments is not None:
@@ -222,7 +274,7 @@ class Problem(eqx.Module):
         parts = []
         for obs, idx in zip(self.observations, self.index, strict=True):
             sub = pred._replace(q=None if pred.q is None else pred.q[idx], omega=pred.omega[idx])
-            parts.append(obs.residuals(sub))
+            parts.append(jnp.where(obs.in_window(self.horizon), obs.residuals(sub), 0.0))
         return jnp.concatenate(parts)
 
     def loss(self, theta) -> jax.Array:

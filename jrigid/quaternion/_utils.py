@@ -9,6 +9,7 @@ import jax.numpy as jnp
 from jax import lax
 from jax.typing import ArrayLike
 
+from jrigid import linalg
 from jrigid._checks import (
     check_shape,
     is_traced,  # noqa: F401  (re-exported for the quaternion modules)
@@ -60,12 +61,16 @@ def rescale(x: jax.Array) -> tuple[jax.Array, jax.Array]:
     ``x`` with a NaN or infinite entry has no direction: ``x / s`` is all NaN there, so
     every function built on it returns NaN for that element. ``s`` carries no gradient:
     functions of ``x`` that are homogeneous (``normalize``, ``norm``, the conversions)
-    then still get exact derivatives.
+    then still get exact derivatives. The largest component is found by elementwise
+    maxima over the (short) last axis, not a reduction, so that XLA fuses it with its
+    neighbours (see :mod:`jrigid.linalg`).
     """
     info = jnp.finfo(x.dtype)
     lo = math.sqrt(float(info.tiny)) / float(info.eps)
     hi = math.sqrt(float(info.max)) / (2.0 * x.shape[-1])
-    m = jnp.max(jnp.abs(x), axis=-1, keepdims=True)
+    m = jnp.abs(x[..., :1])
+    for i in range(1, x.shape[-1]):
+        m = jnp.maximum(m, jnp.abs(x[..., i : i + 1]))
     finite = jnp.isfinite(m)
     keep = ((m >= lo) & (m <= hi)) | (m == 0) | ~finite
     s = lax.stop_gradient(jnp.where(keep, jnp.ones_like(m), m))
@@ -75,13 +80,10 @@ def rescale(x: jax.Array) -> tuple[jax.Array, jax.Array]:
 def unit(x: jax.Array) -> jax.Array:
     """``x / |x|`` along the last axis, safe for any finite non-zero scale (``0`` gives NaN).
 
-    One ``rsqrt``, not a division by ``sqrt``: XLA rewrites ``x / sqrt(s)`` into
-    ``x * rsqrt(s)`` only where the ``sqrt`` has no other use, so the same step rounded
-    differently when recomputed inside a reverse pass (where the ``sqrt`` is reused),
-    and checkpointed gradients through projected solves drifted (up to 1e-3).
+    :func:`jrigid.linalg.unit` after :func:`rescale`; where no rescaling is needed the
+    result is bit for bit that of ``linalg.unit`` (the integrators' lean version).
     """
-    x, _ = rescale(x)
-    return x * lax.rsqrt(jnp.sum(x * x, axis=-1, keepdims=True))
+    return linalg.unit(rescale(x)[0])
 
 
 def batch_shape(x: jax.Array, core_ndim: int) -> tuple[int, ...]:
@@ -111,19 +113,17 @@ def safe_norm(v: jax.Array) -> jax.Array:
     with a finite (zero) gradient at the zero vector (double ``where``); NaN for a
     vector with a NaN or infinite entry."""
     v, s = rescale(v)
-    n2 = jnp.sum(v * v, axis=-1)
+    n2 = linalg.norm2(v)
     zero = n2 == 0
     n2_safe = jnp.where(zero, jnp.ones_like(n2), n2)
     return s[..., 0] * jnp.where(zero, jnp.zeros_like(n2), jnp.sqrt(n2_safe))
 
 
 def cross(a: jax.Array, b: jax.Array) -> jax.Array:
-    """Cross product of ``(..., 3)`` arrays with equal batch shape."""
-    ax, ay, az = a[..., 0], a[..., 1], a[..., 2]
-    bx, by, bz = b[..., 0], b[..., 1], b[..., 2]
-    return jnp.stack([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx], axis=-1)
+    """Cross product of ``(..., 3)`` arrays (:func:`jrigid.linalg.cross`)."""
+    return linalg.cross(a, b)
 
 
 def dot(a: jax.Array, b: jax.Array) -> jax.Array:
-    """Dot product over the last axis; batch shapes must already agree."""
-    return jnp.sum(a * b, axis=-1)
+    """Dot product over the last axis (:func:`jrigid.linalg.dot`, no reduction op)."""
+    return linalg.dot(a, b)

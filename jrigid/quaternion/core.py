@@ -148,7 +148,9 @@ def normalize(q: ArrayLike) -> jax.Array:
     its largest component first when its squares would underflow or overflow. A zero
     quaternion has no direction: the result is NaN (no error is raised, so that the
     function stays traceable); non-finite input gives NaN. Use :func:`check_quaternion`
-    to reject such input with a clear error.
+    to reject such input with a clear error. Where ``|q|`` is moderate the result is
+    bit for bit :func:`jrigid.linalg.unit`'s ``q * rsqrt(q·q)``, the lean form the
+    integrators use on their (already nearly unit) states.
 
     Args:
         q: ``(..., 4)``.
@@ -172,7 +174,7 @@ def inverse(q: ArrayLike) -> jax.Array:
         ``(..., 4)``.
     """
     q, s = rescale(quaternion_arg(q))
-    return conjugate(q) / (s * jnp.sum(q * q, axis=-1, keepdims=True))
+    return conjugate(q) / (s * dot(q, q)[..., None])
 
 
 def canonicalize(q: ArrayLike) -> jax.Array:
@@ -218,8 +220,8 @@ def rotate(q: ArrayLike, v: ArrayLike) -> jax.Array:
     q, v = broadcast_batch(q, 1, v, 1)
     w, u = q[..., :1], q[..., 1:]
     return (
-        (w * w - jnp.sum(u * u, axis=-1, keepdims=True)) * v
-        + 2.0 * jnp.sum(u * v, axis=-1, keepdims=True) * u
+        (w * w - dot(u, u)[..., None]) * v
+        + 2.0 * dot(u, v)[..., None] * u
         + 2.0 * w * cross(u, v)
     )
 
@@ -279,7 +281,7 @@ def to_axis_angle(q: ArrayLike) -> tuple[jax.Array, jax.Array]:
     """
     q = canonicalize(rescale(quaternion_arg(q))[0])
     w, v = q[..., 0], q[..., 1:]
-    n2 = jnp.sum(v * v, axis=-1)
+    n2 = dot(v, v)
     nonzero = n2 > 0
     n = jnp.sqrt(jnp.where(nonzero, n2, jnp.ones_like(n2)))
     default = jnp.zeros_like(v).at[..., 0].set(1)
@@ -308,7 +310,7 @@ def from_rotvec(rotvec: ArrayLike) -> jax.Array:
     r = vector_arg(rotvec, "rotvec")
     r_scaled, s = rescale(r)
     s = s[..., 0]
-    n2_scaled = jnp.sum(r_scaled * r_scaled, axis=-1)
+    n2_scaled = dot(r_scaled, r_scaled)
     theta2 = s * s * n2_scaled  # overflows to inf only where θ is huge: not small then
     small = theta2 < epsilon(r.dtype)
     theta = s * jnp.sqrt(jnp.where(small, jnp.ones_like(n2_scaled), n2_scaled))
@@ -336,7 +338,7 @@ def to_rotvec(q: ArrayLike) -> jax.Array:
     """
     q = canonicalize(rescale(quaternion_arg(q))[0])
     w, v = q[..., 0], q[..., 1:]
-    n2 = jnp.sum(v * v, axis=-1)
+    n2 = dot(v, v)
     small = n2 < epsilon(q.dtype) * w * w
     n = jnp.sqrt(jnp.where(small, jnp.ones_like(n2), n2))
     w_safe = jnp.where(small, w, jnp.ones_like(w))

@@ -19,6 +19,8 @@ from ._utils import (
     as_float_all,
     as_float_pair,
     broadcast_batch,
+    cross,
+    dot,
     is_traced,
     matrix_arg,
     quaternion_arg,
@@ -70,7 +72,7 @@ def to_matrix(q: ArrayLike) -> jax.Array:
 def _det3(m: jax.Array) -> jax.Array:
     """Determinant of ``(..., 3, 3)`` by cofactors (cheap, differentiable)."""
     a, b, c = m[..., 0, :], m[..., 1, :], m[..., 2, :]
-    return jnp.sum(a * jnp.cross(b, c), axis=-1)
+    return dot(a, cross(b, c))
 
 
 def from_matrix(matrix: ArrayLike, *, atol: float | None = None) -> jax.Array:

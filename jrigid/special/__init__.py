@@ -6,11 +6,15 @@ accepts the complement ``m1 = 1 - m`` as a keyword, which keeps full relative ac
 when ``m`` is within a few ulps of 1 (``ellipk(m1=1e-12)``, ``ellipj(u, m1=1e-12)``).
 
 * Carlson's symmetric integrals: :func:`elliprf`, :func:`elliprd`, :func:`elliprj`,
-  :func:`elliprc` (duplication with a fixed number of steps; DLMF 19.36).
+  :func:`elliprc` (duplication with a fixed number of steps; DLMF 19.36), and
+  :func:`elliprf_sqrt`, :func:`elliprj_sqrt`, which take the square roots of the
+  arguments (finite derivatives where an argument is zero).
 * Legendre's integrals: :func:`ellipk`, :func:`ellipe`, :func:`ellippi` (complete),
   :func:`ellipkinc`, :func:`ellipeinc`, :func:`ellippiinc` (incomplete, any amplitude).
 * Jacobi functions: :func:`ellipj` (``sn, cn, dn, am`` like ``scipy.special.ellipj``),
-  :func:`sn`, :func:`cn`, :func:`dn`, :func:`am`, for ``0 ≤ m ≤ 1`` and any real ``u``.
+  :func:`sn`, :func:`cn`, :func:`dn`, :func:`am`, for ``0 ≤ m ≤ 1`` and any real ``u``;
+  :func:`jacobi_with_index` also returns the half-period index ``j`` of ``u = 2jK + r``
+  (for unwrapping quasi-periodic integrals), with :func:`complete_k` the ``K`` it needs.
 
 All functions are jitted, broadcast their arguments, work under ``vmap``, in float32 and
 float64, and are differentiable (forward and reverse mode) in all arguments. In float64
@@ -20,13 +24,14 @@ few times the change caused by rounding the argument itself (``eps |u f'(u)|``);
 raising, so that the functions can run under ``jit``.
 """
 
-from ._carlson import elliprc, elliprd, elliprf, elliprj
-from ._jacobi import am, cn, dn, ellipj, sn
+from ._carlson import elliprc, elliprd, elliprf, elliprf_sqrt, elliprj, elliprj_sqrt
+from ._jacobi import am, cn, complete_k, dn, ellipj, jacobi_with_index, sn
 from ._legendre import ellipe, ellipeinc, ellipk, ellipkinc, ellippi, ellippiinc
 
 __all__ = [
     "am",
     "cn",
+    "complete_k",
     "dn",
     "ellipe",
     "ellipeinc",
@@ -38,6 +43,9 @@ __all__ = [
     "elliprc",
     "elliprd",
     "elliprf",
+    "elliprf_sqrt",
     "elliprj",
+    "elliprj_sqrt",
+    "jacobi_with_index",
     "sn",
 ]

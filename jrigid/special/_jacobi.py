@@ -170,7 +170,14 @@ def _ellipj_all_jvp(primals, tangents):
 
 
 def complete_k(m1):
-    """``K`` from the complement ``m1`` (``(...)``), finite for ``m1 > 0``; differentiable."""
+    """``K(m) = R_F(0, m1, 1)`` from the complement ``m1 = 1 − m``.
+
+    Args:
+        m1: ``(...)`` complementary parameter, ``0 < m1 ≤ 1`` (``m1 = 0`` gives ``inf``).
+
+    Returns:
+        ``(...)`` array; differentiable (the ``K`` that :func:`jacobi_with_index` takes).
+    """
     return _rf_sqrt(jnp.zeros_like(m1), _safe_sqrt(m1), jnp.ones_like(m1))
 
 
@@ -178,8 +185,17 @@ def jacobi_with_index(u, m, m1, kk):
     """``(sn, cn, dn, am, j)`` with ``j = round(u / 2K)``; ``m, m1`` and ``kk = K(m)`` given.
 
     ``(-1)^j (sn, cn)`` are the values at ``u - 2jK ∈ [-K, K]`` (so ``(-1)^j cn ≥ 0``);
-    used by :mod:`jrigid.exact` to unwrap quasi-periodic integrals. Differentiable in
-    ``u, m, m1``; ``kk`` must equal ``complete_k(m1)`` (it is not differentiated).
+    used by :mod:`jrigid.exact` and :mod:`jrigid.lagrange_top` to unwrap quasi-periodic
+    integrals (``∫_0^u f = 2j ∫_0^K f + ∫_0^r f`` for ``f`` of period ``2K``).
+
+    Args:
+        u: ``(...)`` argument, any real value.
+        m, m1: ``(...)`` parameter and its complement ``1 − m`` (both given, consistent).
+        kk: ``(...)`` ``K(m)``; must equal :func:`complete_k` ``(m1)`` (not differentiated).
+
+    Returns:
+        ``(sn, cn, dn, am, j)``, each ``(...)``; ``j`` is an integer-valued float.
+        Differentiable in ``u, m, m1``.
     """
     return _ellipj_all(u, m, m1, kk)
 

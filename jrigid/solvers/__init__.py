@@ -1,0 +1,21 @@
+"""Explicit Runge–Kutta pairs with fused stages, as diffrax solvers.
+
+diffrax's Runge–Kutta solvers are generic over the tableau and the state's pytree; on a
+CPU, for a state of eight numbers, that generality is most of a step's cost. The
+solvers here evaluate the same tableaus with every stage written out (constants folded,
+zero coefficients skipped) on the state raveled into one flat array, so that XLA fuses
+each stage into a few kernels. They are ordinary ``diffrax.AbstractAdaptiveSolver``
+subclasses: ``diffrax.diffeqsolve`` with its step-size controllers, ``SaveAt``, events
+and adjoints works with them as with diffrax's own.
+
+- :class:`FusedTsit5` — Tsitouras' 5(4) pair, 7 stages (FSAL), 4th-order dense output;
+- :class:`FusedDopri8` — Dormand–Prince 8(7), 14 stages (FSAL), 7th-order dense output.
+
+The tableaus are diffrax's own (``diffrax.Tsit5.tableau``, ``diffrax.Dopri8.tableau``),
+so each fused solver takes the same steps as its diffrax counterpart up to rounding.
+"""
+
+from jrigid.solvers.fused import FusedRungeKutta, PolynomialInterpolation
+from jrigid.solvers.pairs import FusedDopri8, FusedTsit5
+
+__all__ = ["FusedDopri8", "FusedRungeKutta", "FusedTsit5", "PolynomialInterpolation"]

@@ -1,0 +1,126 @@
+"""The generic fused explicit Runge–Kutta step (see :mod:`jrigid.solvers`)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import ClassVar
+
+import diffrax
+import equinox.internal as eqxi
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.flatten_util import ravel_pytree
+
+__all__ = ["FusedRungeKutta", "PolynomialInterpolation"]
+
+
+def _combination(base, h, coefficients, stages):
+    """``base + h Σ cᵢ kᵢ`` over the nonzero coefficients (Python floats: folded by XLA)."""
+    total = None
+    for c, k in zip(coefficients, stages, strict=False):
+        c = float(c)
+        if c == 0.0:
+            continue
+        term = c * k
+        total = term if total is None else total + term
+    if total is None:
+        return base
+    return total * h if base is None else base + h * total
+
+
+class PolynomialInterpolation(diffrax.AbstractLocalInterpolation):
+    """Dense output ``y(t0 + θh) = y0 + h Σᵢ bᵢ(θ) fᵢ`` of one step.
+
+    ``bᵢ(θ) = Σⱼ B[i, j] θ^(j+1)`` with the class's coefficient matrix ``B`` (subclasses
+    set :attr:`coefficients`). Built by diffrax from a step's ``dense_info``.
+
+    Attributes:
+        t0, t1: the step's end points.
+        y0: the state at ``t0`` (the solver's pytree).
+        f: the stage derivatives, the state's pytree with a leading stage axis ``s``.
+    """
+
+    t0: jax.Array
+    t1: jax.Array
+    y0: object
+    f: object
+    coefficients: ClassVar[np.ndarray]
+
+    def __init__(self, *, t0, t1, y0, y1, f):
+        del y1  # part of diffrax's interface; the polynomial ends at it by construction
+        self.t0 = t0
+        self.t1 = t1
+        self.y0 = y0
+        self.f = f
+
+    def evaluate(self, t0, t1=None, left=True):
+        del left
+        if t1 is not None:
+            return jax.tree_util.tree_map(
+                lambda a, b: a - b, self.evaluate(t1), self.evaluate(t0)
+            )
+        h = self.t1 - self.t0
+        theta = (t0 - self.t0) / jnp.where(h == 0, 1, h)
+        dtype = jnp.result_type(theta)
+        coeffs = jnp.asarray(self.coefficients, dtype)
+        powers = theta ** jnp.arange(1, coeffs.shape[1] + 1, dtype=dtype)
+        weights = h * (coeffs @ powers)  # (s,)
+        return jax.tree_util.tree_map(
+            lambda y, f: y + jnp.tensordot(weights, f, axes=1).astype(y.dtype), self.y0, self.f
+        )
+
+
+class FusedRungeKutta(diffrax.AbstractAdaptiveSolver):
+    """An explicit embedded Runge–Kutta pair with its stages written out (abstract).
+
+    Subclasses set :attr:`tableau` (a ``diffrax.ButcherTableau`` of an explicit pair
+    whose last stage is evaluated at the step's end, first-same-as-last),
+    :attr:`interpolation_cls` (a :class:`PolynomialInterpolation` subclass over all the
+    stages) and :meth:`order`. ``terms`` must be a single ``diffrax.ODETerm``.
+    """
+
+    tableau: ClassVar[diffrax.ButcherTableau]
+    term_structure: ClassVar = diffrax.AbstractTerm
+    interpolation_cls: ClassVar[Callable[..., PolynomialInterpolation]]
+
+    def init(self, terms, t0, t1, y0, args):
+        return ravel_pytree(terms.vf(t0, y0, args))[0]
+
+    def func(self, terms, t0, y0, args):
+        return terms.vf(t0, y0, args)
+
+    def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
+        tab = self.tableau
+        flat0, unravel = ravel_pytree(y0)
+
+        def field(t, flat):
+            return ravel_pytree(terms.vf(t, unravel(flat), args))[0].astype(flat.dtype)
+
+        h = t1 - t0
+        f0 = jax.lax.cond(
+            eqxi.unvmap_any(made_jump),
+            lambda: field(t0, flat0),
+            lambda: solver_state,
+        )
+        stages = [f0]
+        y_stage = flat0
+        for row, c in zip(tab.a_lower, tab.c, strict=True):
+            y_stage = _combination(flat0, h, row, stages)
+            t_stage = t1 if float(c) == 1.0 else t0 + float(c) * h
+            # A barrier per stage: XLA would otherwise fuse a stage's vector field into
+            # every later stage that uses it, recomputing it (measured: up to 4x slower).
+            stages.append(jax.lax.optimization_barrier(field(t_stage, y_stage)))
+        # First-same-as-last: the last stage is evaluated at (t1, y1).
+        flat1 = y_stage
+        error = _combination(None, h, tab.b_error, stages)
+        dense_info = dict(
+            y0=y0, y1=unravel(flat1), f=jax.vmap(unravel)(jnp.stack(stages))
+        )
+        return (
+            unravel(flat1),
+            unravel(error),
+            dense_info,
+            stages[-1],
+            diffrax.RESULTS.successful,
+        )

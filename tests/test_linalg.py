@@ -1,0 +1,36 @@
+"""jrigid.linalg: written-out small-vector algebra against numpy."""
+
+import jax.numpy as jnp
+import numpy as np
+
+from jrigid import linalg
+
+RNG = np.random.default_rng(7)
+
+
+def test_dot_cross_matvec_solve_match_numpy_on_batches():
+    a, b = RNG.normal(size=(5, 2, 3)), RNG.normal(size=(5, 2, 3))
+    np.testing.assert_allclose(linalg.dot(jnp.asarray(a), jnp.asarray(b)), np.sum(a * b, -1),
+                               rtol=1e-14)
+    q = RNG.normal(size=(5, 4))
+    np.testing.assert_allclose(linalg.dot(jnp.asarray(q), jnp.asarray(q)), np.sum(q * q, -1),
+                               rtol=1e-14)
+    np.testing.assert_allclose(linalg.norm2(jnp.asarray(a)), np.sum(a * a, -1), rtol=1e-14)
+    np.testing.assert_allclose(linalg.cross(jnp.asarray(a), jnp.asarray(b)), np.cross(a, b),
+                               rtol=1e-13, atol=1e-15)
+    m = RNG.normal(size=(5, 2, 3, 3))
+    np.testing.assert_allclose(linalg.matvec(jnp.asarray(m), jnp.asarray(a)),
+                               np.einsum("...ij,...j->...i", m, a), rtol=1e-13, atol=1e-14)
+    np.testing.assert_allclose(linalg.solve3(jnp.asarray(m), jnp.asarray(a)),
+                               np.linalg.solve(m, a[..., None])[..., 0], rtol=1e-10)
+
+
+def test_broadcasting_batch_shapes():
+    a = jnp.asarray(RNG.normal(size=(4, 3)))
+    b = jnp.asarray(RNG.normal(size=(3,)))
+    assert linalg.dot(a, b).shape == (4,)
+    assert linalg.cross(a, b).shape == (4, 3)
+
+
+def test_singular_solve_is_not_finite():
+    assert not np.all(np.isfinite(linalg.solve3(jnp.zeros((3, 3)), jnp.ones(3))))
