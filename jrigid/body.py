@@ -166,8 +166,9 @@ class RigidBody(eqx.Module):
         """``[(bad, message), ...]``: the body's value checks as traced ``()`` flags.
 
         The inertia conditions of :func:`jrigid.inertia.validate` (finite, positive,
-        triangle inequality unless ``allow_nonphysical``), a finite positive mass and a
-        finite centre of mass. Used by the solvers to check inputs inside ``jit``/``vmap``.
+        triangle inequality unless ``allow_nonphysical``), a finite positive mass, a
+        finite centre of mass and a unit ``frame``. Used by the solvers to check inputs
+        inside ``jit``/``vmap``.
         """
         conditions = inertia.conditions(
             self.moments, kind="moments", allow_nonphysical=self.allow_nonphysical
@@ -180,6 +181,12 @@ class RigidBody(eqx.Module):
             )
         )
         out.append((~jnp.all(jnp.isfinite(self.com)), "RigidBody: com must be finite"))
+        out.append(
+            (
+                _frame_error(self.frame),
+                _FRAME_MESSAGE.format(tol=quat.default_atol(self.frame.dtype)),
+            )
+        )
         return out
 
     def check(self) -> RigidBody:

@@ -28,6 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jrigid import quaternion as quat
 from jrigid._checks import is_traced
 from jrigid.formulations import AbstractFormulation
 from jrigid.invariants import Invariants
@@ -228,7 +229,7 @@ def input_checks(formulation, scene, state: State, ts, rtol, atol) -> list[tuple
     eps = jnp.finfo(rtol.dtype).eps
     name = jnp.dtype(rtol.dtype).name
     finite = lambda a: jnp.all(jnp.isfinite(a))  # noqa: E731
-    n2 = jnp.sum(state.q * state.q)
+    n = quat.norm(state.q)  # scale-safe: |q| = 1e-300 or 1e300 is a valid orientation
     out = [
         (~jnp.isfinite(rtol) | (rtol <= 0), "rtol must be finite and > 0"),
         (
@@ -241,7 +242,7 @@ def input_checks(formulation, scene, state: State, ts, rtol, atol) -> list[tuple
         (jnp.any(jnp.diff(ts) <= 0), "ts must be strictly increasing"),
         (~finite(state.q), "initial_state.q has non-finite entries (NaN or inf)"),
         (
-            ~(n2 > jnp.finfo(rtol.dtype).tiny) & finite(state.q),
+            ~(n > 0) & finite(state.q),
             "initial_state.q is the zero quaternion: it represents no rotation",
         ),
         (~finite(state.qdot), "initial_state.qdot is not finite (NaN or inf)"),
@@ -256,8 +257,12 @@ def input_checks(formulation, scene, state: State, ts, rtol, atol) -> list[tuple
 
 
 def normalised(state: State) -> State:
-    """``state`` with ``q`` scaled to unit norm (``q̇`` by the same factor)."""
-    n = jnp.sqrt(jnp.sum(state.q * state.q))
+    """``state`` with ``q`` scaled to unit norm (``q̇`` by the same factor).
+
+    Exact for any finite non-zero ``|q|`` (:func:`jrigid.quaternion.norm`), so an
+    orientation given as ``1e300 q`` or ``1e-300 q`` integrates as ``q``.
+    """
+    n = quat.norm(state.q)
     n = jnp.where(n > 0, n, 1.0)
     return State(state.q / n, state.qdot / n, state.x, state.v)
 
@@ -309,9 +314,14 @@ def screen(checks, scene: Scene, state: State, ts, rtol, atol):
     pick = lambda good, a: jnp.where(invalid, jnp.asarray(good, a.dtype), a)  # noqa: E731
     body = scene.body
     body = eqx.tree_at(
-        lambda b: (b.moments, b.mass, b.com),
+        lambda b: (b.moments, b.mass, b.com, b.frame),
         body,
-        (pick(jnp.ones(3), body.moments), pick(1.0, body.mass), pick(jnp.zeros(3), body.com)),
+        (
+            pick(jnp.ones(3), body.moments),
+            pick(1.0, body.mass),
+            pick(jnp.zeros(3), body.com),
+            pick(jnp.array([1.0, 0.0, 0.0, 0.0]), body.frame),
+        ),
     )
     scene = eqx.tree_at(lambda s: s.body, scene, body)
     identity = jnp.array([1.0, 0.0, 0.0, 0.0], dtype)

@@ -538,19 +538,31 @@ def test_max_steps_accepts_numpy_integers_refuses_bools():
         simulate(scene, state, TS[:3], max_steps=True)
 
 
-def test_invalid_members_of_a_vmap_get_their_own_code():
-    """One bad member (zero quaternion, non-physical body) never stops the others."""
-    moments = jnp.array([[1.0, 2.0, 3.0], [1.0, 1.0, 3.0], [1.0, 2.0, 3.0]])
-    qs = jnp.stack([Q0, Q0, jnp.zeros(4)])
+def test_orientation_of_any_scale_integrates_as_the_unit_one():
+    """|q| = 1e300 used to become q = 0 and burn max_steps; 1e-300 was called zero."""
+    state = initial.from_omega(Q0, OMEGA0)
+    ref = simulate(free_scene(), state, TS[:11])
+    for scale in (1e300, 1e-300):
+        traj = simulate(free_scene(), State(scale * state.q, scale * state.qdot), TS[:11])
+        np.testing.assert_allclose(traj.q, ref.q, rtol=0, atol=1e-14)
+        np.testing.assert_allclose(traj.omega, ref.omega, rtol=0, atol=1e-13)
 
-    def run(m, q):
+
+def test_invalid_members_of_a_vmap_get_their_own_code():
+    """One bad member (zero quaternion, non-physical body, zero frame) never stops the
+    others."""
+    moments = jnp.array([[1.0, 2.0, 3.0], [1.0, 1.0, 3.0], [1.0, 2.0, 3.0], [1.0, 2.0, 3.0]])
+    qs = jnp.stack([Q0, Q0, jnp.zeros(4), Q0])
+    frames = jnp.stack([jnp.array([1.0, 0.0, 0.0, 0.0])] * 3 + [jnp.zeros(4)])
+
+    def run(m, q, frame):
         state = initial.from_omega(Q0, OMEGA0)
         state = State(q, state.qdot)
-        return simulate(Scene(RigidBody(m)), state, TS[:11], throw=False)
+        return simulate(Scene(RigidBody(m, frame=frame)), state, TS[:11], throw=False)
 
-    trajs = jax.vmap(run)(moments, qs)
+    trajs = jax.vmap(run)(moments, qs, frames)
     np.testing.assert_array_equal(trajs.result, [Result.success, Result.invalid_input,
-                                                 Result.invalid_input])
+                                                 Result.invalid_input, Result.invalid_input])
     assert np.isnan(np.asarray(trajs.q[1:])).all()
     alone = simulate(free_scene(), initial.from_omega(Q0, OMEGA0), TS[:11])
     np.testing.assert_allclose(trajs.q[0], alone.q, rtol=0, atol=1e-13)
