@@ -251,48 +251,6 @@ def test_from_omega_rejects_bad_quaternions():
     np.testing.assert_allclose(s.q, [1.0, 0.0, 0.0, 0.0])
 
 
-def test_from_omega_broadcasts_q_and_omega_to_one_batch():
-    """A batch of ω used to give q of shape (4,) with q̇ of shape (N, 4)."""
-    rng = np.random.default_rng(2)
-    omegas = rng.normal(size=(5, 3))
-    q = Rotation.random(random_state=rng).as_quat(scalar_first=True)
-    for frame in ("body", "space"):
-        s = initial.from_omega(q, omegas, frame=frame, x=jnp.zeros(3), v=jnp.ones((1, 3)))
-        assert s.q.shape == s.qdot.shape == (5, 4) and s.x.shape == s.v.shape == (5, 3)
-        for k in range(5):  # each member equals the single-state helper
-            one = initial.from_omega(q, omegas[k], frame=frame, x=jnp.zeros(3), v=jnp.ones(3))
-            np.testing.assert_allclose(s.q[k], one.q, atol=1e-15)
-            np.testing.assert_allclose(s.qdot[k], one.qdot, atol=1e-15)
-    # A batch of orientations with one ω, and (3, 1) x (1, 2) batches.
-    qs = Rotation.random(4, random_state=rng).as_quat(scalar_first=True)
-    s = initial.from_omega(qs, omegas[0])
-    assert s.q.shape == s.qdot.shape == (4, 4)
-    np.testing.assert_allclose(s.omega, np.broadcast_to(omegas[0], (4, 3)), atol=1e-14)
-    s = initial.from_omega(qs[:3, None], rng.normal(size=(1, 2, 3)))
-    assert s.q.shape == s.qdot.shape == (3, 2, 4)
-    with pytest.raises(ValueError, match=r"batch shapes do not broadcast: q0 \(4,\), omega \(5,\)"):
-        initial.from_omega(qs, omegas)
-
-
-def test_other_helpers_broadcast_consistently():
-    rng = np.random.default_rng(3)
-    angles, rates = rng.normal(size=(6, 3)), rng.normal(size=3)
-    s = initial.from_euler_rates(angles, rates)
-    assert s.q.shape == s.qdot.shape == (6, 4)
-    np.testing.assert_allclose(s.qdot[2], initial.from_euler_rates(angles[2], rates).qdot,
-                               atol=1e-15)
-    s = initial.tilted(1, jnp.array([0.0, 0.1, 0.2]), 2.0)
-    assert s.q.shape == s.qdot.shape == (3, 4)
-    np.testing.assert_allclose(s.omega[2], initial.tilted(1, 0.2, 2.0).omega, atol=1e-15)
-    with pytest.raises(ValueError, match="tilted: batch shapes"):
-        initial.tilted(1, jnp.zeros(3), jnp.ones(2))
-    with pytest.raises(ValueError, match="axis must be the integer"):
-        initial.tilted(1.0, 0.1, 1.0)
-    scene = Scene(RigidBody(jnp.array([1.0, 2.0, 2.5])))
-    with pytest.raises(ValueError, match="one state"):
-        initial.from_momentum_energy(scene, jnp.ones((2, 3)), 1.0)
-
-
 @pytest.mark.parametrize("scale", [1e-300, 1e300])
 def test_from_omega_normalises_quaternions_of_any_scale(scale):
     """The orientation used to become zeros (1e300) or be refused as zero (1e-300)."""
