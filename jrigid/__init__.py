@@ -41,6 +41,7 @@ _EXPORTS = {
     "Trajectory": "jrigid.trajectory",
     "Result": "jrigid.trajectory",
     "SimulationError": "jrigid.trajectory",
+    "PrecisionWarning": "jrigid.solve",
     "simulate": "jrigid.integrate",
     "Floor": "jrigid.contact",
     "simulate_bounces": "jrigid.contact",
@@ -111,5 +112,6 @@ if TYPE_CHECKING:
     )
     from jrigid.integrate import Result, SimulationError, simulate  # noqa: F401
     from jrigid.scene import FreeFlight, FreeRotation, Gravity, Pivot, Scene, Torque  # noqa: F401
+    from jrigid.solve import PrecisionWarning  # noqa: F401
     from jrigid.state import Kinematics, State  # noqa: F401
     from jrigid.trajectory import Trajectory  # noqa: F401

@@ -1,6 +1,7 @@
-"""Private input helpers shared by every layer: float conversion and error reporting.
+"""Private input helpers shared by every layer: float conversion, shapes, error reporting.
 
-Errors follow one rule across jrigid: with concrete values a bad input raises
+Errors follow one rule across jrigid: a wrong shape raises ``ValueError`` while tracing
+(:func:`check_shape`, free under ``jit``); with concrete values a bad value raises
 ``ValueError`` naming the problem; under ``jit``/``vmap``/``grad`` (traced values) the
 same message is raised at run time through ``equinox.error_if``.
 """
@@ -23,6 +24,36 @@ def as_float(x: ArrayLike) -> jax.Array:
     x = jnp.asarray(x)
     dtype = x.dtype if jnp.issubdtype(x.dtype, jnp.inexact) else jnp.result_type(float)
     return jnp.asarray(x, dtype=jax.dtypes.canonicalize_dtype(dtype))
+
+
+def _shape_text(trailing: tuple[int, ...]) -> str:
+    return "(" + ", ".join(["...", *(str(n) for n in trailing)]) + ")"
+
+
+def check_shape(x, name: str, *trailing: tuple[int, ...], why: str = "") -> jax.Array:
+    """Return ``x`` as an array if its trailing axes match one of ``trailing``.
+
+    A static check (shapes are known while tracing), so it costs nothing under ``jit``.
+
+    Args:
+        x: array-like.
+        name: what ``x`` is, for the message (e.g. ``"q (a quaternion)"``).
+        *trailing: accepted trailing shapes, e.g. ``(4,)`` or ``(2,), (3,)``.
+        why: appended to the expected shape, e.g. ``" to match T of shape (4, 4)"``.
+
+    Returns:
+        ``jnp.asarray(x)``.
+
+    Raises:
+        ValueError: naming the expected trailing shape(s) and the shape received, e.g.
+            ``"q (a quaternion) must have shape (..., 4); got shape (3,)"``.
+    """
+    x = jnp.asarray(x)
+    for shape in trailing:
+        if x.ndim >= len(shape) and x.shape[x.ndim - len(shape) :] == tuple(shape):
+            return x
+    expected = " or ".join(_shape_text(tuple(s)) for s in trailing)
+    raise ValueError(f"{name} must have shape {expected}{why}; got shape {x.shape}")
 
 
 def is_traced(*trees) -> bool:

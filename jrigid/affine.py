@@ -17,19 +17,24 @@ Conventions
 
 Errors
 ------
-Wrong shapes raise ``ValueError`` while tracing, so also inside ``jax.jit``.
-Bad values (a singular matrix passed to :func:`inverse`, a zero-length look direction)
-raise ``ValueError`` when the arguments are concrete; under ``jax.jit``/``vmap`` the same
-check runs through ``equinox.error_if`` and raises a runtime error carrying the message.
+Wrong shapes raise ``ValueError`` naming the expected trailing shape while tracing, so
+also inside ``jax.jit``. Bad values (a singular matrix passed to :func:`inverse`, a
+zero-length look direction, non-finite camera positions, a field of view outside
+``(0, π)``, an aspect ratio that is not positive) raise ``ValueError`` when the arguments
+are concrete; under ``jax.jit``/``vmap`` the same check runs through ``equinox.error_if``
+and raises a runtime error carrying the message. Non-finite points, vectors and matrix
+entries propagate as NaN/inf.
 """
 
 from __future__ import annotations
+
+import numbers
 
 import jax
 import jax.numpy as jnp
 
 from jrigid import quaternion as quat
-from jrigid._checks import as_float, fail_if
+from jrigid._checks import as_float, check_shape, fail_if
 
 __all__ = [
     "about_point",
@@ -60,10 +65,6 @@ __all__ = [
 # --------------------------------------------------------------------------- helpers
 
 
-
-
-
-
 def _matrix(rows) -> jax.Array:
     """Stack a nested list of equally batched scalars ``(...)`` into ``(..., r, c)``."""
     flat = jnp.broadcast_arrays(*[as_float(e) for row in rows for e in row])
@@ -73,20 +74,19 @@ def _matrix(rows) -> jax.Array:
 
 
 def _dim_of_vector(x: jax.Array, name: str) -> int:
-    if x.ndim < 1 or x.shape[-1] not in (2, 3):
-        raise ValueError(f"{name} must have shape (..., 2) or (..., 3), got {x.shape}")
-    return x.shape[-1]
+    return check_shape(x, name, (2,), (3,)).shape[-1]
 
 
 def _dim_of_transform(T: jax.Array, name: str = "T") -> int:
-    if T.ndim < 2 or T.shape[-1] != T.shape[-2] or T.shape[-1] not in (3, 4):
-        raise ValueError(f"{name} must have shape (..., 3, 3) or (..., 4, 4), got {T.shape}")
-    return T.shape[-1] - 1
+    return check_shape(T, name, (3, 3), (4, 4)).shape[-1] - 1
 
 
 def _check_vector3(x: jax.Array, name: str) -> None:
-    if x.ndim < 1 or x.shape[-1] != 3:
-        raise ValueError(f"{name} must have shape (..., 3), got {x.shape}")
+    check_shape(x, name, (3,))
+
+
+def _check_dim(x: jax.Array, n: int, name: str, T: jax.Array) -> None:
+    check_shape(x, name, (n,), why=f" to match T of shape {T.shape}")
 
 
 # --------------------------------------------------------------------------- building blocks
@@ -104,8 +104,7 @@ def from_blocks(A, d) -> jax.Array:
     """
     A, d = as_float(A), as_float(d)
     n = _dim_of_vector(d, "d")
-    if A.ndim < 2 or A.shape[-2:] != (n, n):
-        raise ValueError(f"A must have shape (..., {n}, {n}) to match d {d.shape}, got {A.shape}")
+    check_shape(A, "A", (n, n), why=f" to match d of shape {d.shape}")
     batch = jnp.broadcast_shapes(A.shape[:-2], d.shape[:-1])
     dtype = jnp.result_type(A, d)
     A = jnp.broadcast_to(A, batch + (n, n)).astype(dtype)
@@ -201,10 +200,7 @@ def about_point(T, pivot) -> jax.Array:
     """
     T, pivot = as_float(T), as_float(pivot)
     n = _dim_of_transform(T)
-    if pivot.ndim < 1 or pivot.shape[-1] != n:
-        raise ValueError(
-            f"pivot must have shape (..., {n}) to match T {T.shape}, got {pivot.shape}"
-        )
+    _check_dim(pivot, n, "pivot", T)
     return translation(pivot) @ T @ translation(-pivot)
 
 
@@ -239,9 +235,6 @@ def rotation_3d(q, pivot=None) -> jax.Array:
     Returns:
         ``(..., 4, 4)`` whose upper-left block is ``quaternion.to_matrix(q)``.
     """
-    q = as_float(q)
-    if q.ndim < 1 or q.shape[-1] != 4:
-        raise ValueError(f"q must have shape (..., 4), got {q.shape}")
     R = quat.to_matrix(q)
     T = from_blocks(R, jnp.zeros(3, dtype=R.dtype))
     return _maybe_about(T, pivot)
@@ -369,9 +362,7 @@ def from_homogeneous(X) -> jax.Array:
 
     ``w = 0`` (a vector or a point at infinity) gives ``inf``/``nan``.
     """
-    X = as_float(X)
-    if X.ndim < 1 or X.shape[-1] not in (3, 4):
-        raise ValueError(f"X must have shape (..., 3) or (..., 4), got {X.shape}")
+    X = check_shape(as_float(X), "X", (3,), (4,))
     return X[..., :-1] / X[..., -1:]
 
 
@@ -387,15 +378,13 @@ def apply(T, X) -> jax.Array:
     """
     T, X = as_float(T), as_float(X)
     n = _dim_of_transform(T)
-    if X.ndim < 1 or X.shape[-1] != n + 1:
-        raise ValueError(f"X must have shape (..., {n + 1}) to match T {T.shape}, got {X.shape}")
+    _check_dim(X, n + 1, "X", T)
     return (T @ X[..., None])[..., 0]
 
 
 def _check_cartesian(T: jax.Array, x: jax.Array, name: str) -> int:
     n = _dim_of_transform(T)
-    if x.ndim < 1 or x.shape[-1] != n:
-        raise ValueError(f"{name} must have shape (..., {n}) to match T {T.shape}, got {x.shape}")
+    _check_dim(x, n, name, T)
     return n
 
 
@@ -454,8 +443,9 @@ def orthographic(points, axis: int = 2) -> tuple[jax.Array, jax.Array]:
     """
     points = as_float(points)
     _check_vector3(points, "points")
-    if axis not in (0, 1, 2):
-        raise ValueError(f"axis must be 0, 1 or 2, got {axis!r}")
+    if not isinstance(axis, numbers.Integral) or isinstance(axis, bool) or axis not in (0, 1, 2):
+        raise ValueError(f"axis must be the integer 0, 1 or 2, got {axis!r}")
+    axis = int(axis)
     uv = jnp.stack([points[..., (axis + 1) % 3], points[..., (axis + 2) % 3]], axis=-1)
     return uv, -points[..., axis]
 
@@ -475,8 +465,8 @@ def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> jax.Array:
     columns of ``R`` the camera axes in world coordinates (17.9).
 
     Args:
-        eye, target: ``(..., 3)``; must differ.
-        up: ``(..., 3)`` approximate up direction, not parallel to ``target - eye``.
+        eye, target: ``(..., 3)`` finite; must differ.
+        up: ``(..., 3)`` finite approximate up direction, not parallel to ``target - eye``.
 
     Returns:
         ``(..., 4, 4)``.
@@ -485,6 +475,13 @@ def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> jax.Array:
     for name, x in (("eye", eye), ("target", target), ("up", up)):
         _check_vector3(x, name)
     eye, target, up = jnp.broadcast_arrays(eye, target, up)
+    finite = jnp.all(jnp.isfinite(eye) & jnp.isfinite(target) & jnp.isfinite(up), axis=-1)
+    eye = fail_if(
+        eye,
+        ~finite,
+        "look_at: eye, target and up must be finite",
+        lambda: f"eye {eye}, target {target}, up {up}",
+    )
     forward = target - eye
     dist, zero = _safe_norm(forward)
     scale = jnp.maximum(jnp.max(jnp.abs(eye), axis=-1), jnp.max(jnp.abs(target), axis=-1))
@@ -525,14 +522,18 @@ def perspective(
 
     Args:
         points: ``(..., 3)`` world coordinates.
-        eye, target: ``(..., 3)``.
+        eye, target: ``(..., 3)``, finite and distinct.
         fov: vertical field of view in radians, in ``(0, π)``; ``(...)``.
         up: ``(..., 3)`` approximate up direction.
-        aspect: image width / height, ``(...)``. ``fov`` and ``aspect`` broadcast
-            against the batch shape of the points (numpy rules).
+        aspect: image width / height, finite and ``> 0``, ``(...)``. ``fov`` and
+            ``aspect`` broadcast against the batch shape of the points (numpy rules).
 
     Returns:
         ``(uv, depth)``: ``uv (..., 2)`` and ``depth (...)``; batches broadcast.
+
+    Raises:
+        ValueError: wrong shapes; for concrete values, ``fov`` outside ``(0, π)``,
+            ``aspect`` not finite and positive, and the conditions of :func:`look_at`.
     """
     points = as_float(points)
     _check_vector3(points, "points")
@@ -542,6 +543,12 @@ def perspective(
         ~((fov > 0) & (fov < jnp.pi)),
         "perspective: fov must be in (0, π) radians",
         lambda: f"fov {fov}",
+    )
+    aspect = fail_if(
+        aspect,
+        ~(jnp.isfinite(aspect) & (aspect > 0)),
+        "perspective: aspect (width / height) must be finite and > 0",
+        lambda: f"aspect {aspect}",
     )
     V = look_at(eye, target, up)
     pc = apply_to_points(V, points)

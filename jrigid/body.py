@@ -16,13 +16,31 @@ from jax.typing import ArrayLike
 
 from jrigid import inertia
 from jrigid import quaternion as quat
-from jrigid._checks import as_float, is_traced
+from jrigid._checks import as_float, check_shape, is_traced
 
 __all__ = ["RigidBody"]
 
 
+def _exactly(x: jax.Array, shape: tuple[int, ...], name: str, hint: str = "") -> None:
+    """A body holds one body: ``x`` must have exactly ``shape`` (no batch axes)."""
+    check_shape(x, name, shape)  # the trailing shape first, naming what is expected
+    if x.shape != shape:
+        raise ValueError(
+            f"RigidBody: {name} must have shape {shape}, got {x.shape}: a RigidBody is one "
+            "body; for many, build them inside jax.vmap (or use jrigid.ensemble)" + hint
+        )
 
 
+def _frame_error(frame: jax.Array) -> jax.Array:
+    """Whether ``frame`` is not a finite unit quaternion (within the default tolerance)."""
+    tol = quat.default_atol(frame.dtype)
+    return ~(jnp.all(jnp.isfinite(frame)) & (jnp.abs(quat.norm(frame) - 1) <= tol))
+
+
+_FRAME_MESSAGE = (
+    "RigidBody: frame must be a unit quaternion (w, x, y, z) (non-zero, finite, norm 1 "
+    "within {tol:g}); normalise it with jrigid.quaternion.normalize"
+)
 
 
 class RigidBody(eqx.Module):
@@ -39,14 +57,21 @@ class RigidBody(eqx.Module):
         frame: ``(4,)`` unit quaternion taking principal-frame vectors to the frame the
             body was specified in (``identity`` when built from moments): a vector
             ``v`` in principal coordinates is ``quaternion.rotate(frame, v)`` in the
-            original coordinates. See :meth:`reference_orientation`.
+            original coordinates. See :meth:`reference_orientation`. It is not
+            normalised here: a zero, non-finite or non-unit frame (beyond
+            :func:`jrigid.quaternion.default_atol`) is refused, since it most likely is
+            a mistake (an axis vector, a scalar-last quaternion).
         allow_nonphysical: static; skip the triangle inequality ``Ia + Ib ≥ Ic`` (e.g.
             for the Hairer–Lubich–Wanner test body ``(2, 1, 2/3)``).
 
-    Construction with concrete values validates them and raises ``ValueError`` for a
-    non-finite, non-positive or (unless allowed) non-physical inertia, a non-positive
-    mass or a non-finite centre of mass. Inside a JAX transformation the checks are
-    deferred to :func:`jrigid.simulate`, which runs them with ``equinox.error_if``.
+    Shapes are checked always (also under ``jit``): exactly ``(3,)``, ``()``, ``(3,)``
+    and ``(4,)``, so a batch of moments, a vector mass or a full tensor passed as
+    ``moments`` (use :meth:`from_tensor`) raise ``ValueError``. Construction with
+    concrete values also validates them and raises ``ValueError`` for a non-finite,
+    non-positive or (unless allowed) non-physical inertia (:func:`jrigid.inertia.validate`),
+    a non-positive mass, a non-finite centre of mass or a frame that is not a unit
+    quaternion. Inside a JAX transformation the value checks are deferred to
+    :meth:`check`, which :func:`jrigid.simulate` runs with ``equinox.error_if``.
     """
 
     moments: jax.Array = eqx.field(converter=as_float)
@@ -56,21 +81,30 @@ class RigidBody(eqx.Module):
     allow_nonphysical: bool = eqx.field(static=True, default=False, kw_only=True)
 
     def __check_init__(self):
-        if self.moments.shape[-1:] != (3,):
-            raise ValueError(f"moments must have shape (..., 3), got {self.moments.shape}")
-        if self.com.shape[-1:] != (3,):
-            raise ValueError(f"com must have shape (..., 3), got {self.com.shape}")
-        if self.frame.shape[-1:] != (4,):
-            raise ValueError(f"frame must have shape (..., 4), got {self.frame.shape}")
-        if is_traced(self.moments, self.mass, self.com):
+        tensor_hint = (
+            "; a full inertia tensor goes through RigidBody.from_tensor"
+            if self.moments.shape[-2:] == (3, 3)
+            else ""
+        )
+        _exactly(self.moments, (3,), "moments", tensor_hint)
+        _exactly(self.mass, (), "mass")
+        _exactly(self.com, (3,), "com")
+        _exactly(self.frame, (4,), "frame")
+        if is_traced(self.moments, self.mass, self.com, self.frame):
             return
         inertia.validate(
             self.moments, kind="moments", allow_nonphysical=self.allow_nonphysical
         )
-        if not bool(jnp.all(jnp.isfinite(self.mass) & (self.mass > 0))):
-            raise ValueError(f"mass must be finite and positive, got {self.mass}")
+        if not bool(jnp.isfinite(self.mass) & (self.mass > 0)):
+            raise ValueError(f"RigidBody: mass must be finite and positive, got {self.mass}")
         if not bool(jnp.all(jnp.isfinite(self.com))):
-            raise ValueError(f"com must be finite, got {self.com}")
+            raise ValueError(f"RigidBody: com must be finite, got {self.com}")
+        if bool(_frame_error(self.frame)):
+            tol = quat.default_atol(self.frame.dtype)
+            raise ValueError(
+                _FRAME_MESSAGE.format(tol=tol)
+                + f" (got {self.frame}, norm {float(quat.norm(self.frame)):g})"
+            )
 
     @classmethod
     def from_tensor(
@@ -103,8 +137,7 @@ class RigidBody(eqx.Module):
                 values only).
         """
         tensor = as_float(tensor)
-        if tensor.shape[-2:] != (3, 3):
-            raise ValueError(f"tensor must have shape (..., 3, 3), got {tensor.shape}")
+        _exactly(tensor, (3, 3), "tensor")
         if not is_traced(tensor):
             inertia.validate(tensor, kind="tensor", allow_nonphysical=allow_nonphysical)
         moments, frame = inertia.principal_axes(tensor)
@@ -133,8 +166,9 @@ class RigidBody(eqx.Module):
         """``[(bad, message), ...]``: the body's value checks as traced ``()`` flags.
 
         The inertia conditions of :func:`jrigid.inertia.validate` (finite, positive,
-        triangle inequality unless ``allow_nonphysical``), a finite positive mass and a
-        finite centre of mass. Used by the solvers to check inputs inside ``jit``/``vmap``.
+        triangle inequality unless ``allow_nonphysical``), a finite positive mass, a
+        finite centre of mass and a unit ``frame``. Used by the solvers to check inputs
+        inside ``jit``/``vmap``.
         """
         conditions = inertia.conditions(
             self.moments, kind="moments", allow_nonphysical=self.allow_nonphysical
@@ -147,6 +181,12 @@ class RigidBody(eqx.Module):
             )
         )
         out.append((~jnp.all(jnp.isfinite(self.com)), "RigidBody: com must be finite"))
+        out.append(
+            (
+                _frame_error(self.frame),
+                _FRAME_MESSAGE.format(tol=quat.default_atol(self.frame.dtype)),
+            )
+        )
         return out
 
     def check(self) -> RigidBody:
@@ -159,4 +199,11 @@ class RigidBody(eqx.Module):
             "RigidBody: mass must be finite and positive",
         )
         com = eqx.error_if(self.com, ~jnp.isfinite(self.com), "RigidBody: com must be finite")
-        return eqx.tree_at(lambda b: (b.moments, b.mass, b.com), self, (moments, mass, com))
+        frame = eqx.error_if(
+            self.frame,
+            _frame_error(self.frame),
+            _FRAME_MESSAGE.format(tol=quat.default_atol(self.frame.dtype)),
+        )
+        return eqx.tree_at(
+            lambda b: (b.moments, b.mass, b.com, b.frame), self, (moments, mass, com, frame)
+        )

@@ -11,14 +11,19 @@ Examples::
 
 Each run writes figures, ``numbers.json`` and ``report.md`` into its results folder and
 prints the report's path. Runs use float64 (``jax_enable_x64``), jrigid's recommended
-mode. Unknown experiments and bad parameters end with exit code 2 and a message on stderr
-naming what is valid.
+mode. Unknown experiments, bad parameters (values that do not convert, non-finite numbers
+such as ``nan``, ``inf`` or ``1e400``, a negative mass or any parameter the experiment
+declares positive, see :mod:`jrigid.registry`) and a results folder that cannot be
+written end with exit code 2 and a one-line message on stderr naming the problem, before
+anything runs; malformed command lines (unknown options, a missing NAME) also print the
+usage.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+import tempfile
 import traceback
 from collections.abc import Sequence
 from pathlib import Path
@@ -117,9 +122,25 @@ def _enable_float64() -> None:
     jax.config.update("jax_enable_x64", True)
 
 
+def _default_out(name: str) -> Path:
+    return Path("results") / name
+
+
+def _unwritable(folder: Path) -> str | None:
+    """``None`` if ``folder`` exists or can be created, and a file can be written in it;
+    else the reason, in one line."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as e:
+        return f"cannot write results to {str(folder)!r}: {e.strerror or e}"
+    return None
+
+
 def _run_one(name: str, out: Path | None, quick: bool, params: dict[str, str]) -> Path:
     _enable_float64()
-    out = out if out is not None else Path("results") / name
+    out = out if out is not None else _default_out(name)
     print(f"== {name}{' (quick)' if quick else ''} -> {out}/", flush=True)
     registry.run(name, out, quick=quick, params=params)
     report = out / "report.md"
@@ -127,14 +148,22 @@ def _run_one(name: str, out: Path | None, quick: bool, params: dict[str, str]) -
     return report
 
 
+def _fail(parser: argparse.ArgumentParser, message: str):
+    """Exit with code 2 and ``prog: error: message`` on stderr, one line (no usage)."""
+    parser.exit(2, f"{parser.prog}: error: {' '.join(message.split())}\n")
+
+
 def _cmd_run(p_run: argparse.ArgumentParser, args: argparse.Namespace, name: str) -> int:
     try:
         raw = registry.split_pairs([*args.params, *args.param])
     except registry.ParameterError as e:
-        p_run.error(str(e))
+        _fail(p_run, str(e))
     if name == "all":
         if raw:
-            p_run.error("parameters cannot be given with `run all`; run experiments one by one")
+            _fail(p_run, "parameters cannot be given with `run all`; run experiments one by one")
+        problem = _unwritable(args.out if args.out is not None else Path("results"))
+        if problem:
+            _fail(p_run, problem)
         failed = []
         for exp_name in registry.discover():
             out = args.out / exp_name if args.out is not None else None
@@ -151,7 +180,10 @@ def _cmd_run(p_run: argparse.ArgumentParser, args: argparse.Namespace, name: str
         exp = registry.get(name)
         registry.parse_params(name, exp.main, raw)  # check before creating folders
     except (registry.ExperimentError, registry.ParameterError) as e:
-        p_run.error(str(e))
+        _fail(p_run, str(e))
+    problem = _unwritable(args.out if args.out is not None else _default_out(name))
+    if problem:
+        _fail(p_run, problem)
     _run_one(name, args.out, args.quick, raw)
     return 0
 
@@ -164,8 +196,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     Returns:
         the exit code (0 success, 1 an experiment failed in ``run all``). Usage errors
-        (unknown experiment or parameter, bad value) raise ``SystemExit(2)`` after printing
-        the valid choices to stderr.
+        (unknown experiment or parameter, bad or non-finite value, a non-positive value
+        for a positive parameter, an unwritable results folder) raise ``SystemExit(2)``
+        after printing the problem and the valid choices to stderr in one line.
     """
     parser = build_parser()
     # parse_known_args: KEY=VALUE may also follow options (`run NAME --out D a=1`)

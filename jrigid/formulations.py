@@ -142,7 +142,7 @@ class QuaternionAcceleration(AbstractFormulation):
         return self.project(state, scene)
 
     def kinematics(self, scene, y):
-        return Kinematics(quat.normalize(y.q), omega_from_rate(y.q, y.qdot), y.x, y.v)
+        return Kinematics(linalg.unit(y.q), omega_from_rate(y.q, y.qdot), y.x, y.v)
 
     def vector_field(self, t, y, scene):
         q, qd = y.q, y.qdot
@@ -161,7 +161,7 @@ class QuaternionAcceleration(AbstractFormulation):
         return State(qd, qdd, xd, vd)
 
     def project(self, y, scene, invariants=None):
-        q = quat.normalize(y.q)
+        q = linalg.unit(y.q)
         q, omega = restore(scene, invariants, q, omega_from_rate(y.q, y.qdot))
         return State(q, quat.derivative(q, omega), y.x, y.v)
 
@@ -191,17 +191,17 @@ class QuaternionOmega(AbstractFormulation):
         return QuaternionOmegaState(state.q, state.omega, state.x, state.v)
 
     def kinematics(self, scene, y):
-        return Kinematics(quat.normalize(y.q), y.omega, y.x, y.v)
+        return Kinematics(linalg.unit(y.q), y.omega, y.x, y.v)
 
     def vector_field(self, t, y, scene):
-        kin = Kinematics(quat.normalize(y.q), y.omega, y.x, y.v)
+        kin = Kinematics(linalg.unit(y.q), y.omega, y.x, y.v)
         force, torque = scene.wrench(t, kin)
         qd = 0.5 * quat.multiply(y.q, _pure(y.omega))
         xd, vd = _translation_rates(scene, y.v, force)
         return QuaternionOmegaState(qd, scene.omega_dot(y.omega, torque), xd, vd)
 
     def project(self, y, scene, invariants=None):
-        q, omega = restore(scene, invariants, quat.normalize(y.q), y.omega)
+        q, omega = restore(scene, invariants, linalg.unit(y.q), y.omega)
         return QuaternionOmegaState(q, omega, y.x, y.v)
 
     def raw_quaternion(self, y):

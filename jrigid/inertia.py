@@ -10,7 +10,11 @@ shape sits along the body axes. Arguments broadcast over leading batch dimension
 Errors: :func:`validate` raises ``ValueError`` naming the violated condition and the
 offending values (it needs concrete values; under a JAX transformation it falls back to
 :func:`check`). :func:`check` is jit-safe: it raises at run time through
-``equinox.error_if``. Wrong shapes raise ``ValueError`` while tracing.
+``equinox.error_if``. Wrong shapes raise ``ValueError`` naming the expected trailing shape
+while tracing. The shape functions and :func:`from_point_masses` / :func:`parallel_axis`
+refuse a mass that is not finite and positive (point masses: not negative) and sizes or
+positions that are negative or not finite (``ValueError`` for concrete values,
+``equinox.error_if`` under ``jit``).
 """
 
 from __future__ import annotations
@@ -20,7 +24,7 @@ import jax
 import jax.numpy as jnp
 
 from jrigid import quaternion as quat
-from jrigid._checks import as_float
+from jrigid._checks import as_float, check_shape, fail_if, is_traced
 
 __all__ = [
     "box",
@@ -43,6 +47,24 @@ __all__ = [
 ]
 
 
+def _mass(m, name: str = "mass") -> jax.Array:
+    m = as_float(m)
+    return fail_if(
+        m, ~(jnp.isfinite(m) & (m > 0)), f"{name} must be finite and > 0", lambda: f"{m}"
+    )
+
+
+def _size(x, name: str) -> jax.Array:
+    x = as_float(x)
+    return fail_if(
+        x, ~(jnp.isfinite(x) & (x >= 0)), f"{name} must be finite and >= 0", lambda: f"{x}"
+    )
+
+
+def _body(m, **sizes) -> list[jax.Array]:
+    """Checked mass and sizes of a shape, broadcast to one batch shape."""
+    checked = [_mass(m), *(_size(v, k) for k, v in sizes.items())]
+    return jnp.broadcast_arrays(*checked)
 
 
 def _moments(*columns) -> jax.Array:
@@ -56,13 +78,14 @@ def _eye(like: jax.Array) -> jax.Array:
 
 
 def _check_tensor(inertia: jax.Array, name: str = "inertia") -> None:
-    if inertia.ndim < 2 or inertia.shape[-2:] != (3, 3):
-        hint = (
-            " (use to_tensor for principal moments)"
-            if inertia.ndim >= 1 and inertia.shape[-1] == 3
-            else ""
-        )
-        raise ValueError(f"{name} must be a tensor of shape (..., 3, 3), got {inertia.shape}{hint}")
+    hint = ""
+    if inertia.ndim >= 1 and inertia.shape[-1] == 3 and inertia.shape[-2:] != (3, 3):
+        hint = " (a tensor; use to_tensor for principal moments)"
+    check_shape(inertia, name, (3, 3), why=hint)
+
+
+def _check_moments(moments: jax.Array, name: str = "moments") -> None:
+    check_shape(moments, name, (3,))
 
 
 # --------------------------------------------------------------------------- Table 17.1
@@ -78,7 +101,7 @@ def ellipsoid(m, a, b, c) -> jax.Array:
     Returns:
         ``(..., 3)``: ``m (b²+c², a²+c², a²+b²) / 5``.
     """
-    m, a, b, c = jnp.broadcast_arrays(*[as_float(x) for x in (m, a, b, c)])
+    m, a, b, c = _body(m, a=a, b=b, c=c)
     a2, b2, c2 = a * a, b * b, c * c
     return _moments(m * (b2 + c2) / 5, m * (a2 + c2) / 5, m * (a2 + b2) / 5)
 
@@ -93,7 +116,7 @@ def box(m, a, b, c) -> jax.Array:
     Returns:
         ``(..., 3)``: ``m (b²+c², a²+c², a²+b²) / 12`` (Table 17.1).
     """
-    m, a, b, c = jnp.broadcast_arrays(*[as_float(x) for x in (m, a, b, c)])
+    m, a, b, c = _body(m, a=a, b=b, c=c)
     a2, b2, c2 = a * a, b * b, c * c
     return _moments(m * (b2 + c2) / 12, m * (a2 + c2) / 12, m * (a2 + b2) / 12)
 
@@ -108,7 +131,7 @@ def sphere(m, r) -> jax.Array:
     Returns:
         ``(..., 3)``.
     """
-    m, r = jnp.broadcast_arrays(as_float(m), as_float(r))
+    m, r = _body(m, r=r)
     i = 0.4 * m * r * r
     return _moments(i, i, i)
 
@@ -124,7 +147,7 @@ def thin_rod(m, length) -> jax.Array:
         ``(..., 3)``: ``(m l²/12, m l²/12, 0)``. The zero moment makes the rod a
         degenerate body: :func:`validate` rejects it as not positive definite.
     """
-    m, length = jnp.broadcast_arrays(as_float(m), as_float(length))
+    m, length = _body(m, length=length)
     i = m * length * length / 12
     return _moments(i, i, jnp.zeros_like(i))
 
@@ -139,7 +162,7 @@ def thin_disk(m, r) -> jax.Array:
     Returns:
         ``(..., 3)``: ``(m r²/4, m r²/4, m r²/2)``.
     """
-    m, r = jnp.broadcast_arrays(as_float(m), as_float(r))
+    m, r = _body(m, r=r)
     i = m * r * r / 4
     return _moments(i, i, 2 * i)
 
@@ -157,7 +180,7 @@ def thin_plate(m, a, b) -> jax.Array:
     Returns:
         ``(..., 3)``: ``(m b²/12, m a²/12, m (a²+b²)/12)``.
     """
-    m, a, b = jnp.broadcast_arrays(as_float(m), as_float(a), as_float(b))
+    m, a, b = _body(m, a=a, b=b)
     ix, iy = m * b * b / 12, m * a * a / 12
     return _moments(ix, iy, ix + iy)
 
@@ -173,7 +196,7 @@ def solid_cylinder(m, r, h) -> jax.Array:
     Returns:
         ``(..., 3)``: ``(m(3r²+h²)/12, m(3r²+h²)/12, m r²/2)`` (17.31 integrated).
     """
-    m, r, h = jnp.broadcast_arrays(as_float(m), as_float(r), as_float(h))
+    m, r, h = _body(m, r=r, h=h)
     i = m * (3 * r * r + h * h) / 12
     return _moments(i, i, m * r * r / 2)
 
@@ -206,8 +229,7 @@ def to_tensor(moments) -> jax.Array:
         ``(..., 3, 3)``.
     """
     moments = as_float(moments)
-    if moments.ndim < 1 or moments.shape[-1] != 3:
-        raise ValueError(f"moments must have shape (..., 3), got {moments.shape}")
+    _check_moments(moments)
     return moments[..., :, None] * _eye(moments)
 
 
@@ -219,22 +241,27 @@ def from_point_masses(masses, positions, origin=None) -> jax.Array:
     products of inertia.
 
     Args:
-        masses: ``(..., N)``.
-        positions: ``(..., N, 3)``.
-        origin: ``(..., 3)``; default the centre of mass.
+        masses: ``(..., N)``, finite and ``>= 0``.
+        positions: ``(..., N, 3)``, finite.
+        origin: ``(..., 3)``; default the centre of mass (then the total mass must be
+            ``> 0``).
 
     Returns:
         ``(..., 3, 3)``.
     """
     masses, positions = as_float(masses), as_float(positions)
     if positions.ndim < 2 or positions.shape[-1] != 3:
-        raise ValueError(f"positions must have shape (..., N, 3), got {positions.shape}")
-    if masses.ndim < 1 or masses.shape[-1] != positions.shape[-2]:
-        raise ValueError(
-            f"masses must have shape (..., N) with N = {positions.shape[-2]} "
-            f"to match positions {positions.shape}, got {masses.shape}"
-        )
+        raise ValueError(f"positions must have shape (..., N, 3); got shape {positions.shape}")
     n = positions.shape[-2]
+    check_shape(masses, "masses", (n,), why=f" to match positions of shape {positions.shape}")
+    masses = _size(masses, "masses")
+    positions = fail_if(positions, ~jnp.isfinite(positions), "positions must be finite")
+    if origin is None:
+        masses = fail_if(
+            masses,
+            ~(jnp.sum(masses, axis=-1) > 0),
+            "masses must not all be zero (the centre of mass is undefined)",
+        )
     batch = jnp.broadcast_shapes(masses.shape[:-1], positions.shape[:-2])
     masses = jnp.broadcast_to(masses, batch + (n,))
     positions = jnp.broadcast_to(positions, batch + (n, 3))
@@ -244,8 +271,7 @@ def from_point_masses(masses, positions, origin=None) -> jax.Array:
         )
     else:
         origin = as_float(origin)
-        if origin.ndim < 1 or origin.shape[-1] != 3:
-            raise ValueError(f"origin must have shape (..., 3), got {origin.shape}")
+        check_shape(origin, "origin", (3,))
         batch = jnp.broadcast_shapes(batch, origin.shape[:-1])
         masses = jnp.broadcast_to(masses, batch + (n,))
         positions = jnp.broadcast_to(positions, batch + (n, 3))
@@ -263,16 +289,15 @@ def parallel_axis(I_cm, mass, d) -> jax.Array:
 
     Args:
         I_cm: ``(..., 3, 3)`` about the centre of mass.
-        mass: total mass ``(...)``.
+        mass: total mass ``(...)``, finite and ``> 0``.
         d: displacement between the centre of mass and the new origin ``(..., 3)``.
 
     Returns:
         ``(..., 3, 3)``.
     """
-    I_cm, mass, d = as_float(I_cm), as_float(mass), as_float(d)
+    I_cm, mass, d = as_float(I_cm), _mass(mass), as_float(d)
     _check_tensor(I_cm, "I_cm")
-    if d.ndim < 1 or d.shape[-1] != 3:
-        raise ValueError(f"d must have shape (..., 3), got {d.shape}")
+    check_shape(d, "d", (3,))
     batch = jnp.broadcast_shapes(I_cm.shape[:-2], mass.shape, d.shape[:-1])
     I_cm = jnp.broadcast_to(I_cm, batch + (3, 3))
     mass = jnp.broadcast_to(mass, batch)
@@ -311,9 +336,6 @@ def rotate_tensor(inertia, q) -> jax.Array:
     Returns:
         ``(..., 3, 3)`` in the space frame. ``rotate_tensor(I, quat.conjugate(q))`` goes back.
     """
-    q = as_float(q)
-    if q.ndim < 1 or q.shape[-1] != 4:
-        raise ValueError(f"q must have shape (..., 4), got {q.shape}")
     return rotate_tensor_by_matrix(inertia, quat.to_matrix(q))
 
 
@@ -352,8 +374,7 @@ def _kind(inertia: jax.Array, kind: str | None) -> str:
     if kind == "tensor":
         _check_tensor(inertia)
     elif kind == "moments":
-        if inertia.ndim < 1 or inertia.shape[-1] != 3:
-            raise ValueError(f"moments must have shape (..., 3), got {inertia.shape}")
+        _check_moments(inertia)
     else:
         raise ValueError(f"kind must be None, 'moments' or 'tensor', got {kind!r}")
     return kind
@@ -367,27 +388,51 @@ def _conditions(inertia: jax.Array, kind: str, allow_nonphysical: bool, rtol):
     finite = jnp.all(jnp.isfinite(inertia), axis=core)
     clean = jnp.where(jnp.isfinite(inertia), inertia, 0.0)
     out = [("values not finite", ~finite, "values", inertia)]
+    ok = finite  # each element is reported under its first failed condition only
     if kind == "tensor":
         scale = jnp.max(jnp.abs(clean), axis=core)
         asym = jnp.max(jnp.abs(clean - jnp.swapaxes(clean, -1, -2)), axis=core)
-        out.append(("tensor not symmetric", finite & ~(asym <= rtol * scale), "tensor", inertia))
-        moments = jnp.linalg.eigvalsh(0.5 * (clean + jnp.swapaxes(clean, -1, -2)))
+        symmetric = asym <= rtol * scale
+        out.append(("tensor not symmetric", ok & ~symmetric, "tensor", inertia))
+        ok = ok & symmetric
+        sym = 0.5 * (clean + jnp.swapaxes(clean, -1, -2))
+        moments = jnp.linalg.eigvalsh(sym)
+        pd = _positive_definite(sym)
     else:
         moments = jnp.sort(clean, axis=-1)
+        pd = moments[..., 0] > 0  # exact: the moments are given
     lo, mid, hi = moments[..., 0], moments[..., 1], moments[..., 2]
-    pd = lo > 3 * eps * jnp.abs(hi)
-    out.append(("not positive definite", finite & ~pd, "principal moments", moments))
+    out.append(("not positive definite", ok & ~pd, "principal moments", moments))
+    ok = ok & pd
     if not allow_nonphysical:
         tri = lo + mid >= hi * (1 - rtol)
         out.append(
             (
                 "triangle inequality Ia + Ib >= Ic violated",
-                finite & pd & ~tri,
+                ok & ~tri,
                 "principal moments",
                 moments,
             )
         )
     return out
+
+
+def _positive_definite(sym: jax.Array) -> jax.Array:
+    """Whether a symmetric ``(..., 3, 3)`` is positive definite, independent of units.
+
+    The test runs on ``D^-1/2 I D^-1/2`` (``D`` the diagonal), which is positive definite
+    exactly when ``I`` is and whose eigenvalues lie in ``[0, 3]`` whatever the scale of
+    each axis, so a needle such as ``diag(1e-12, 1e12, 1e12)`` passes: its smallest
+    moment is not compared with the largest. The smallest scaled eigenvalue must exceed
+    its rounding error, ``3 eps`` times the largest.
+    """
+    eps = jnp.finfo(sym.dtype).eps
+    d = jnp.diagonal(sym, axis1=-2, axis2=-1)
+    positive = jnp.all(d > 0, axis=-1)
+    r = jax.lax.rsqrt(jnp.where(d > 0, d, jnp.ones_like(d)))
+    scaled = sym * r[..., :, None] * r[..., None, :]
+    ev = jnp.linalg.eigvalsh(scaled)
+    return positive & (ev[..., 0] > 3 * eps * ev[..., -1])
 
 
 def conditions(inertia, *, allow_nonphysical: bool = False, kind: str | None = None, rtol=None):
@@ -431,12 +476,17 @@ def validate(inertia, *, allow_nonphysical: bool = False, kind: str | None = Non
     """Check that ``inertia`` is a physical inertia; raise ``ValueError`` otherwise.
 
     Conditions, in order: finite; symmetric (tensor only, ``|I − Iᵀ| ≤ rtol·max|I|``);
-    positive definite (smallest principal moment ``> 3 eps ×`` the largest); triangle
-    inequality ``Ia + Ib ≥ Ic (1 − rtol)`` of the principal moments, which every real
-    mass distribution satisfies (skipped with ``allow_nonphysical=True``, e.g. for the
+    positive definite (moments: the smallest ``> 0``; tensor: positive diagonal and,
+    after scaling to unit diagonal, the smallest eigenvalue above its rounding error
+    ``3 eps ×`` the largest; both tests are independent of the units of each axis, so
+    ``(1e-12, 1e12, 1e12)``, a needle, is accepted); triangle inequality
+    ``Ia + Ib ≥ Ic (1 − rtol)`` of the principal moments, which every real mass
+    distribution satisfies (skipped with ``allow_nonphysical=True``, e.g. for the
     Hairer–Lubich–Wanner test body ``(2, 1, 2/3)``). Flat bodies meet it with equality.
 
-    The message names the first violated condition, the first offending batch index and
+    Each batch element is reported under the first condition it violates (a
+    non-symmetric tensor as "not symmetric", never as "not positive definite"). The
+    message names the first violated condition, the first offending batch index and
     its values. Under a JAX transformation (jit, vmap, grad) this defers to :func:`check`.
 
     Args:
@@ -451,7 +501,7 @@ def validate(inertia, *, allow_nonphysical: bool = False, kind: str | None = Non
     """
     inertia = as_float(inertia)
     kind = _kind(inertia, kind)
-    if isinstance(inertia, jax.core.Tracer):
+    if is_traced(inertia):
         return check(inertia, allow_nonphysical=allow_nonphysical, kind=kind, rtol=rtol)
     for name, bad, label, values in _conditions(inertia, kind, allow_nonphysical, rtol):
         if bool(jnp.any(bad)):

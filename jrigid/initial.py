@@ -11,55 +11,54 @@
 Every helper returns ``x, v`` only when given them (free-flight scenes need both).
 Concrete bad input raises ``ValueError``; inside a JAX transformation the same
 conditions are checked with ``equinox.error_if``.
+
+Batches: :func:`from_omega`, :func:`from_euler_rates` and :func:`tilted` broadcast the
+leading batch dimensions of all their array arguments (numpy rules) and return a state
+whose ``q``, ``q̇`` (and ``x``, ``v``) all carry that one batch shape, ready for
+:func:`jrigid.ensemble.simulate_many`; batch shapes that do not broadcast raise
+``ValueError``. :func:`from_momentum_energy` takes one state only.
 """
 
 from __future__ import annotations
+
+import numbers
 
 import jax
 import jax.numpy as jnp
 from jax.typing import ArrayLike
 
 from jrigid import quaternion as quat
-from jrigid._checks import as_float, fail_if
+from jrigid._checks import as_float, check_shape, fail_if
 from jrigid.scene import Scene
 from jrigid.state import State
 
 __all__ = ["from_euler_rates", "from_momentum_energy", "from_omega", "tilted"]
 
 
-
-
-
-
-
-
 def unit_quaternion(q: ArrayLike, name: str = "q") -> jax.Array:
     """Validate and normalise an orientation quaternion.
 
     Args:
-        q: ``(..., 4)`` quaternion, any non-zero norm.
+        q: ``(..., 4)`` quaternion, any finite non-zero norm (``1e-300`` and ``1e300``
+            included; subnormal numbers count as zero).
         name: name used in error messages.
 
     Returns:
         ``(..., 4)`` unit quaternion.
 
     Raises:
-        ValueError: wrong shape, non-finite entries, or (near) zero norm.
+        ValueError: wrong shape, non-finite entries, or zero norm.
     """
-    q = as_float(q)
-    if q.shape[-1:] != (4,):
-        raise ValueError(f"{name} must have shape (..., 4), got {q.shape}")
-    n = jnp.sqrt(jnp.sum(q * q, axis=-1))
+    q = check_shape(as_float(q), name, (4,), why=", a quaternion (w, x, y, z)")
     q = fail_if(q, ~jnp.isfinite(q), f"{name} has non-finite entries (NaN or inf)")
-    tiny = jnp.sqrt(jnp.finfo(q.dtype).tiny)
-    q = fail_if(q, n <= tiny, f"{name} is the zero quaternion: it represents no rotation")
-    return q / jnp.maximum(n, tiny)[..., None]
+    q = fail_if(
+        q, ~(quat.norm(q) > 0), f"{name} is the zero quaternion: it represents no rotation"
+    )
+    return quat.normalize(q)
 
 
 def _vector(x: ArrayLike, name: str) -> jax.Array:
-    x = as_float(x)
-    if x.shape[-1:] != (3,):
-        raise ValueError(f"{name} must have shape (..., 3), got {x.shape}")
+    x = check_shape(as_float(x), name, (3,))
     return fail_if(x, ~jnp.isfinite(x), f"{name} has non-finite entries (NaN or inf)")
 
 
@@ -69,6 +68,23 @@ def _translation(x, v):
     if x is None:
         return None, None
     return _vector(x, "x"), _vector(v, "v")
+
+
+def _broadcast(where: str, **arrays):
+    """Broadcast the batch shapes (all but the last axis) of the named arrays.
+
+    ``None`` entries are passed through. Raises ``ValueError`` naming each batch shape
+    when they do not broadcast.
+    """
+    given = {k: a for k, a in arrays.items() if a is not None}
+    try:
+        batch = jnp.broadcast_shapes(*(a.shape[:-1] for a in given.values()))
+    except ValueError:
+        shapes = ", ".join(f"{k} {a.shape[:-1]}" for k, a in given.items())
+        raise ValueError(f"{where}: batch shapes do not broadcast: {shapes}") from None
+    return [
+        None if a is None else jnp.broadcast_to(a, batch + a.shape[-1:]) for a in arrays.values()
+    ]
 
 
 def from_omega(
@@ -82,22 +98,24 @@ def from_omega(
     """State from an orientation and an angular velocity, ``q̇ = ½ q ⊗ (0, ω)`` (17.44).
 
     Args:
-        q0: ``(4,)`` orientation (principal body frame → space); normalised. Default
-            identity.
-        omega: ``(3,)`` angular velocity.
+        q0: ``(..., 4)`` orientation (principal body frame → space); normalised.
+            Default identity.
+        omega: ``(..., 3)`` angular velocity.
         frame: ``"body"`` (default) or ``"space"``, the frame ``omega`` is given in.
-        x, v: ``(3,)`` centre-of-mass position and velocity, for free flight only.
+        x, v: ``(..., 3)`` centre-of-mass position and velocity, for free flight only.
 
     Returns:
-        :class:`~jrigid.state.State`.
+        :class:`~jrigid.state.State` whose fields share the broadcast batch shape of the
+        arguments (see the module docstring).
     """
+    if frame not in ("body", "space"):
+        raise ValueError(f"frame must be 'body' or 'space', got {frame!r}")
     omega = _vector(omega, "omega")
     q0 = quat.identity(dtype=omega.dtype) if q0 is None else unit_quaternion(q0, "q0")
+    x, v = _translation(x, v)
+    q0, omega, x, v = _broadcast("from_omega", q0=q0, omega=omega, x=x, v=v)
     if frame == "space":
         omega = quat.rotate_inverse(q0, omega)
-    elif frame != "body":
-        raise ValueError(f"frame must be 'body' or 'space', got {frame!r}")
-    x, v = _translation(x, v)
     return State(q0, quat.derivative(q0, omega), x, v)
 
 
@@ -112,9 +130,12 @@ def euler_rates_to_omega(angles: ArrayLike, rates: ArrayLike) -> jax.Array:
         rates: ``(..., 3)`` ``(φ̇, θ̇, ψ̇)``.
 
     Returns:
-        ``(..., 3)`` body angular velocity.
+        ``(..., 3)`` body angular velocity; the batch shapes of ``angles`` and ``rates``
+        broadcast.
     """
-    angles, rates = as_float(angles), as_float(rates)
+    angles = check_shape(as_float(angles), "angles", (3,))
+    rates = check_shape(as_float(rates), "rates", (3,))
+    angles, rates = _broadcast("euler_rates_to_omega", angles=angles, rates=rates)
     _, th, ps = angles[..., 0], angles[..., 1], angles[..., 2]
     dph, dth, dps = rates[..., 0], rates[..., 1], rates[..., 2]
     st, ct, sp, cp = jnp.sin(th), jnp.cos(th), jnp.sin(ps), jnp.cos(ps)
@@ -137,14 +158,15 @@ def from_euler_rates(
     ``ω3 = ψ̇ + φ̇ cos θ`` the spin.
 
     Args:
-        angles: ``(3,)`` ``(φ, θ, ψ)`` in radians (scipy ``"ZXZ"``).
-        rates: ``(3,)`` ``(φ̇, θ̇, ψ̇)``.
-        x, v: ``(3,)`` centre-of-mass position and velocity, for free flight only.
+        angles: ``(..., 3)`` ``(φ, θ, ψ)`` in radians (scipy ``"ZXZ"``).
+        rates: ``(..., 3)`` ``(φ̇, θ̇, ψ̇)``.
+        x, v: ``(..., 3)`` centre-of-mass position and velocity, for free flight only.
 
     Returns:
-        :class:`~jrigid.state.State`.
+        :class:`~jrigid.state.State` (batch shapes broadcast).
     """
     angles, rates = _vector(angles, "angles"), _vector(rates, "rates")
+    angles, rates = _broadcast("from_euler_rates", angles=angles, rates=rates)
     q0 = quat.from_euler("ZXZ", angles)
     return from_omega(q0, euler_rates_to_omega(angles, rates), x=x, v=v)
 
@@ -198,7 +220,11 @@ def from_momentum_energy(
     momentum = _vector(momentum, "momentum")
     energy = as_float(energy)
     if momentum.shape != (3,) or energy.shape != ():
-        raise ValueError("from_momentum_energy expects momentum (3,) and a scalar energy")
+        raise ValueError(
+            "from_momentum_energy builds one state: momentum must have shape (3,) and "
+            f"energy shape (); got {momentum.shape} and {energy.shape} (use jax.vmap "
+            "for a batch)"
+        )
     tensor = scene.inertia()
     moments = jnp.diagonal(tensor)
     off = jnp.max(jnp.abs(tensor - jnp.diag(moments)))
@@ -233,6 +259,10 @@ def from_momentum_energy(
     return from_omega(q0, body_l / moments, x=x, v=v)
 
 
+def _is_axis(i) -> bool:
+    return isinstance(i, numbers.Integral) and not isinstance(i, bool) and i in (0, 1, 2)
+
+
 def tilted(
     axis: int,
     angle: ArrayLike,
@@ -251,22 +281,31 @@ def tilted(
 
     Args:
         axis: static principal axis index ``0, 1, 2`` (body axes 1, 2, 3).
-        angle: ``()`` tilt in radians.
-        rate: ``()`` angular speed ``|ω|``.
+        angle: ``(...)`` tilt in radians.
+        rate: ``(...)`` angular speed ``|ω|``.
         toward: static axis the tilt leans toward; default ``(axis + 1) % 3``.
-        q0: ``(4,)`` orientation; default identity.
-        x, v: ``(3,)`` centre-of-mass position and velocity, for free flight only.
+        q0: ``(..., 4)`` orientation; default identity.
+        x, v: ``(..., 3)`` centre-of-mass position and velocity, for free flight only.
 
     Returns:
-        :class:`~jrigid.state.State`.
+        :class:`~jrigid.state.State` (batch shapes broadcast).
     """
-    if axis not in (0, 1, 2):
-        raise ValueError(f"axis must be 0, 1 or 2, got {axis!r}")
+    if not _is_axis(axis):
+        raise ValueError(f"axis must be the integer 0, 1 or 2, got {axis!r}")
     toward = (axis + 1) % 3 if toward is None else toward
-    if toward not in (0, 1, 2) or toward == axis:
+    if not _is_axis(toward) or toward == axis:
         raise ValueError(f"toward must be an axis index other than {axis}, got {toward!r}")
+    axis, toward = int(axis), int(toward)
     angle, rate = as_float(angle), as_float(rate)
     dtype = jnp.result_type(angle, rate)
-    omega = jnp.zeros(3, dtype=dtype)
-    omega = omega.at[axis].set(rate * jnp.cos(angle)).at[toward].set(rate * jnp.sin(angle))
+    try:
+        batch = jnp.broadcast_shapes(angle.shape, rate.shape)
+    except ValueError:
+        raise ValueError(
+            f"tilted: batch shapes do not broadcast: angle {angle.shape}, rate {rate.shape}"
+        ) from None
+    angle, rate = jnp.broadcast_to(angle, batch), jnp.broadcast_to(rate, batch)
+    omega = jnp.zeros(batch + (3,), dtype=dtype)
+    omega = omega.at[..., axis].set(rate * jnp.cos(angle))
+    omega = omega.at[..., toward].set(rate * jnp.sin(angle))
     return from_omega(q0, omega, x=x, v=v)

@@ -63,6 +63,7 @@ from jrigid.solve import (
     raise_on_failure,
     screen,
     solver_options,
+    warn_precision,
 )
 from jrigid.state import State
 from jrigid.trajectory import Result, SimulationError, Trajectory
@@ -275,7 +276,9 @@ def simulate(
             keeps the closed form for :meth:`Trajectory.at`.
         rtol, atol: PID tolerances, traced (changing them does not recompile). Defaults
             ``1e-8`` and ``1e-10`` (float64), ``1e-5`` and ``1e-7`` (float32).
-            ``rtol`` must be finite, ``> 0`` and at least ``10 eps``.
+            ``rtol`` must be finite, ``> 0`` and at least ``10 eps``. In float32 a
+            :class:`~jrigid.solve.PrecisionWarning` says when the horizon is too long
+            for ``rtol`` (:func:`jrigid.solve.precision_problem`; concrete inputs only).
         max_steps: static step budget (accepted plus rejected steps).
         dt0: initial step; ``None`` lets diffrax choose.
         adjoint: diffrax adjoint; default ``diffrax.RecursiveCheckpointAdjoint()``
@@ -302,6 +305,9 @@ def simulate(
 
     Returns:
         :class:`~jrigid.trajectory.Trajectory`; ``stats`` holds step counts.
+
+    Warns:
+        PrecisionWarning: float32 cannot meet ``rtol`` over ``ts`` (see ``rtol``).
 
     Raises:
         ValueError: bad input (non-physical inertia, zero quaternion, NaN state,
@@ -339,6 +345,7 @@ def simulate(
     state, ts, rtol, atol = prepare(scene, initial_state, ts, rtol, atol, dtype)
     formulation.check_scene(scene)
     _check_saveat(saveat)
+    warn_precision(state, ts, rtol)
     if stepsize_controller is not None:
         if not isinstance(stepsize_controller, diffrax.AbstractStepSizeController):
             raise ValueError(

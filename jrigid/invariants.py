@@ -174,7 +174,7 @@ def _project_top(scene: Scene, targets: jax.Array, q: jax.Array, omega: jax.Arra
     lam = _solve_spd3(gram, [residual[0], residual[1], residual[2]])
     d_theta = -(lam[0] * rows[0][0] + lam[1] * rows[1][0] + lam[2] * rows[2][0])
     d_omega = -nu2 * (lam[0] * rows[0][1] + lam[1] * rows[1][1] + lam[2] * rows[2][1])
-    return quat.normalize(_rotate_body(q, d_theta)), omega + d_omega
+    return linalg.unit(_rotate_body(q, d_theta)), omega + d_omega
 
 
 def _frequency2(scene: Scene, omega: jax.Array) -> jax.Array:

@@ -28,6 +28,7 @@ import jax
 import jax.numpy as jnp
 from jax.typing import ArrayLike
 
+from jrigid import linalg
 from jrigid import quaternion as quat
 from jrigid.formulations import AbstractFormulation
 from jrigid.scene import Scene
@@ -91,10 +92,10 @@ def leapfrog_step(
     v_half = None if y.v is None else y.v + half * f0 / mass
     rate = lambda q: quat.derivative(q, _omega(scene, q, L_half))
     if variant == "chapter":
-        q1 = quat.normalize(y.q + dt * rate(y.q))
+        q1 = linalg.unit(y.q + dt * rate(y.q))
     elif variant == "midpoint":
-        q_mid = quat.normalize(y.q + half * rate(y.q))
-        q1 = quat.normalize(y.q + dt * rate(q_mid))
+        q_mid = linalg.unit(y.q + half * rate(y.q))
+        q1 = linalg.unit(y.q + dt * rate(q_mid))
     else:
         raise ValueError(f"variant must be 'midpoint' or 'chapter', got {variant!r}")
     x1 = None if y.x is None else y.x + dt * v_half

@@ -13,6 +13,17 @@ to the type of the default (see :func:`parse_params`). ``main`` writes its figur
 and summary with :class:`jrigid.report.Report`; if it returns a mapping and wrote no
 ``numbers.json`` / ``report.md``, the runner writes them from that mapping.
 
+Values are checked before the run: numbers must be finite (``nan``, ``inf`` and
+``1e400`` are refused), and a parameter that must be positive is refused unless it is
+``> 0`` (every number in it, for a list). A parameter must be positive when it is a mass
+(named ``mass``, ``mass_*`` or ``*_mass``) or when the experiment declares it so in its
+annotation with :data:`POSITIVE`::
+
+    from typing import Annotated
+    from jrigid.registry import POSITIVE
+
+    def main(out_dir, quick=False, *, radius: Annotated[float, POSITIVE] = 1.0): ...
+
 Where experiments are found
 ---------------------------
 1. Built in: ``demo`` (:mod:`jrigid.demo`) ships inside the package, so ``jrigid list`` and
@@ -40,6 +51,7 @@ import importlib
 import importlib.util
 import inspect
 import json
+import math
 import os
 import sys
 import time
@@ -53,11 +65,13 @@ __all__ = [
     "Experiment",
     "ExperimentError",
     "ParameterError",
+    "POSITIVE",
     "experiment_dirs",
     "discover",
     "get",
     "parameters",
     "parse_params",
+    "positive_parameters",
     "run",
     "BUILTIN",
 ]
@@ -74,6 +88,17 @@ class ExperimentError(LookupError):
 
 class ParameterError(ValueError):
     """A parameter given on the command line that the experiment does not accept."""
+
+
+class _Positive:
+    """The marker behind :data:`POSITIVE`."""
+
+    def __repr__(self) -> str:
+        return "POSITIVE"
+
+
+POSITIVE = _Positive()
+"""Annotation marker of a parameter that must be ``> 0``: ``Annotated[float, POSITIVE]``."""
 
 
 @dataclass(frozen=True)
@@ -246,6 +271,32 @@ def parameters(main: Callable[..., Any]) -> tuple[dict[str, Any], bool]:
     return defaults, open_ended
 
 
+def _is_mass(name: str) -> bool:
+    return name == "mass" or name.startswith("mass_") or name.endswith("_mass")
+
+
+def positive_parameters(main: Callable[..., Any]) -> set[str]:
+    """Names of the parameters of ``main`` that must be ``> 0``.
+
+    A mass (a parameter named ``mass``, ``mass_*`` or ``*_mass``) and any parameter whose
+    annotation is ``Annotated[..., POSITIVE]``. String annotations (``from __future__
+    import annotations``) are evaluated in the experiment's module; if that fails, only
+    the names count.
+    """
+    try:
+        sig = inspect.signature(main, eval_str=True)
+    except Exception:  # an annotation that cannot be evaluated: names only
+        sig = inspect.signature(main)
+    out = set()
+    for p in sig.parameters.values():
+        if p.name in _RESERVED or p.kind in (p.VAR_POSITIONAL, p.VAR_KEYWORD):
+            continue
+        declared = any(m is POSITIVE for m in getattr(p.annotation, "__metadata__", ()))
+        if declared or _is_mass(p.name):
+            out.add(p.name)
+    return out
+
+
 def _type_name(default: Any) -> str:
     if default is inspect.Parameter.empty or default is None:
         return "value"
@@ -258,8 +309,10 @@ def _type_name(default: Any) -> str:
 def describe_parameters(main: Callable[..., Any]) -> str:
     """``name=default (type)`` for each parameter, comma-separated, for help and errors."""
     defaults, open_ended = parameters(main)
+    positive = positive_parameters(main)
     items = [
-        f"{k}={'(required)' if v is inspect.Parameter.empty else v!r} ({_type_name(v)})"
+        f"{k}={'(required)' if v is inspect.Parameter.empty else v!r} "
+        f"({_type_name(v)}{', > 0' if k in positive else ''})"
         for k, v in defaults.items()
     ]
     if open_ended:
@@ -274,6 +327,20 @@ def _literal(text: str) -> Any:
         return text
 
 
+def _numbers(value: Any):
+    """Every int or float in ``value`` (recursing into lists, tuples and dict values)."""
+    if isinstance(value, bool):
+        return
+    if isinstance(value, int | float):
+        yield value
+    elif isinstance(value, list | tuple):
+        for v in value:
+            yield from _numbers(v)
+    elif isinstance(value, dict):
+        for v in value.values():
+            yield from _numbers(v)
+
+
 def convert(text: str, default: Any) -> Any:
     """Convert command-line ``text`` to the type of ``default``.
 
@@ -281,12 +348,21 @@ def convert(text: str, default: Any) -> Any:
     default also accepts an integral float such as ``1e3``); tuple/list: comma-separated
     items or a Python/JSON literal, each item converted like the default's first item;
     ``None`` or no default: a Python literal if ``text`` is one, else the string.
+    Numbers must be finite: ``nan``, ``inf`` and values that overflow (``1e400``) are
+    refused.
 
     Raises:
-        ValueError: if the text does not convert.
+        ValueError: if the text does not convert, or gives a non-finite number.
     """
     if not isinstance(text, str):
         return text
+    value = _convert(text, default)
+    if any(not math.isfinite(x) for x in _numbers(value)):
+        raise ValueError(f"expected finite numbers, got {text!r}")
+    return value
+
+
+def _convert(text: str, default: Any) -> Any:
     if default is inspect.Parameter.empty or default is None:
         return _literal(text)
     if isinstance(default, bool):
@@ -355,10 +431,12 @@ def parse_params(name: str, main: Callable[..., Any], raw: Mapping[str, Any]) ->
         name -> converted value.
 
     Raises:
-        ParameterError: an unknown name or a value that does not convert; the message lists
-            the valid parameters with their defaults and types.
+        ParameterError: an unknown name, a value that does not convert or is not finite,
+            or a parameter that must be positive (see :func:`positive_parameters`) that is
+            not; the message lists the valid parameters with their defaults and types.
     """
     defaults, open_ended = parameters(main)
+    positive = positive_parameters(main)
     typed: dict[str, Any] = {}
     for key, text in raw.items():
         if key in _RESERVED:
@@ -373,6 +451,8 @@ def parse_params(name: str, main: Callable[..., Any], raw: Mapping[str, Any]) ->
         default = defaults.get(key, inspect.Parameter.empty)
         try:
             typed[key] = convert(text, default)
+            if key in positive and any(not x > 0 for x in _numbers(typed[key])):
+                raise ValueError(f"must be > 0, got {text!r}")
         except ValueError as e:
             raise ParameterError(
                 f"bad value for parameter {key!r} of experiment {name!r}: {e}; "

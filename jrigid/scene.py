@@ -105,9 +105,21 @@ class AbstractLoad(eqx.Module):
 
 
 def _gravity_vector(g) -> jax.Array:
+    """``g`` as a ``(3,)`` space-frame vector; a scalar means ``(0, 0, -g)``.
+
+    Raises ``ValueError`` for any other shape (always, also under ``jit``) and for
+    non-finite values (concrete values only).
+    """
     g = jnp.asarray(g)
     dtype = g.dtype if jnp.issubdtype(g.dtype, jnp.floating) else jnp.result_type(float)
     g = jnp.asarray(g, dtype=jax.dtypes.canonicalize_dtype(dtype))
+    if g.shape not in ((), (3,)):
+        raise ValueError(
+            "Gravity: g must be a scalar (meaning (0, 0, -g)) or a vector of shape (3,), "
+            f"got shape {g.shape}"
+        )
+    if not isinstance(g, jax.core.Tracer) and not bool(jnp.all(jnp.isfinite(g))):
+        raise ValueError(f"Gravity: g must be finite, got {g}")
     if g.ndim == 0:
         zero = jnp.zeros_like(g)
         return jnp.stack([zero, zero, -g])

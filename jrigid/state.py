@@ -63,7 +63,7 @@ class State(eqx.Module):
     @property
     def omega_space(self) -> jax.Array:
         """``(..., 3)`` space-frame angular velocity."""
-        return quat.rotate(quat.normalize(self.q), self.omega)
+        return quat.rotate(linalg.unit(self.q), self.omega)
 
 
 class Kinematics(eqx.Module):

@@ -536,3 +536,61 @@ def test_zero_length_look_direction_raises():
         affine.look_at(jnp.array([0.0, 0.0, 5.0]), jnp.zeros(3))  # looking along the default up
     with pytest.raises(ValueError, match="fov"):
         affine.perspective(jnp.zeros(3), eye, jnp.zeros(3), 3.5)
+
+
+@pytest.mark.parametrize("aspect", [0.0, -1.5, np.nan, np.inf])
+def test_perspective_refuses_non_physical_aspect(aspect):
+    eye, target = jnp.array([5.0, 4.0, 3.0]), jnp.zeros(3)
+    with pytest.raises(ValueError, match="aspect"):
+        affine.perspective(jnp.zeros(3), eye, target, 0.8, aspect=aspect)
+    # A batch names the problem too; under jit the same check is a runtime error.
+    with pytest.raises(ValueError, match="aspect"):
+        affine.perspective(jnp.zeros(3), eye, target, 0.8, aspect=jnp.array([1.0, aspect]))
+    run = jax.jit(lambda a: affine.perspective(jnp.zeros(3), eye, target, 0.8, aspect=a))
+    with pytest.raises(Exception, match="aspect"):
+        jax.block_until_ready(run(aspect))
+    np.testing.assert_allclose(run(1.5)[0], 0.0, atol=1e-15)
+
+
+@pytest.mark.parametrize("fov", [0.0, -0.3, np.pi, np.nan])
+def test_perspective_refuses_non_physical_fov(fov):
+    with pytest.raises(ValueError, match="fov"):
+        affine.perspective(jnp.zeros(3), jnp.array([5.0, 4.0, 3.0]), jnp.zeros(3), fov)
+
+
+@pytest.mark.parametrize("bad", ["eye", "target", "up"])
+def test_look_at_refuses_non_finite_positions(bad):
+    args = {"eye": jnp.array([5.0, 4.0, 3.0]), "target": jnp.zeros(3),
+            "up": jnp.array([0.0, 0.0, 1.0])}
+    args[bad] = args[bad].at[1].set(jnp.nan)
+    # Before, a NaN eye was reported as a zero-length look direction.
+    with pytest.raises(ValueError, match="must be finite"):
+        affine.look_at(**args)
+    with pytest.raises(ValueError, match="must be finite"):
+        affine.perspective(jnp.zeros(3), args["eye"], args["target"], 0.8, up=args["up"])
+
+
+@pytest.mark.parametrize("axis", [True, 1.0, "z", -1])
+def test_orthographic_axis_must_be_an_integer_index(axis):
+    with pytest.raises(ValueError, match="axis must be the integer 0, 1 or 2"):
+        affine.orthographic(jnp.ones(3), axis=axis)
+    uv, _ = affine.orthographic(jnp.array([1.0, 2.0, 3.0]), axis=np.int64(2))
+    np.testing.assert_array_equal(uv, [1.0, 2.0])
+
+
+@pytest.mark.parametrize(
+    "call, expected",
+    [
+        (lambda: affine.rotation_3d(jnp.ones(5)), r"\(\.\.\., 4\)"),
+        (lambda: affine.translation(jnp.ones(4)), r"\(\.\.\., 2\) or \(\.\.\., 3\)"),
+        (lambda: affine.inverse(jnp.eye(5)), r"\(\.\.\., 3, 3\) or \(\.\.\., 4, 4\)"),
+        (lambda: affine.apply(jnp.eye(4), jnp.ones(3)), r"\(\.\.\., 4\) to match T"),
+        (lambda: affine.from_homogeneous(jnp.ones(2)), r"\(\.\.\., 3\) or \(\.\.\., 4\)"),
+        (lambda: affine.look_at(jnp.ones(2), jnp.zeros(3)), r"eye must have shape \(\.\.\., 3\)"),
+        (lambda: affine.rotation_3d_axis_angle(jnp.ones(4), 0.1), r"\(\.\.\., 3\)"),
+        (lambda: affine.to_homogeneous(jnp.ones(4), 1.0), r"\(\.\.\., 2\) or \(\.\.\., 3\)"),
+    ],
+)
+def test_shape_errors_name_the_expected_trailing_shape(call, expected):
+    with pytest.raises(ValueError, match=expected):
+        call()

@@ -119,6 +119,77 @@ def test_bad_parameters_exit_2_and_say_what_is_valid(argv, message, capsys):
         assert "valid parameters:" in err
 
 
+@pytest.mark.parametrize("value", ["nan", "inf", "-inf", "1e400", "NaN", "-1e999"])
+@pytest.mark.parametrize("key", ["rate", "axis", "samples"])
+def test_non_finite_numbers_exit_2_with_one_line(key, value, capsys, tmp_path):
+    """They used to reach the experiment and end in a traceback."""
+    text = f"0,{value},1" if key == "axis" else value
+    code, err = _exit_code(["run", "hello", f"{key}={text}", "--out", str(tmp_path)], capsys)
+    assert code == 2
+    assert f"bad value for parameter '{key}'" in err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert list(tmp_path.iterdir()) == []  # refused before anything was written
+
+
+@pytest.mark.parametrize(
+    "argv, key",
+    [
+        (["run", "body_frame", "mass=-1"], "mass"),
+        (["run", "falling_box", "mass=0"], "mass"),
+        (["run", "methane", "mass_h=-1.008"], "mass_h"),
+    ],
+)
+def test_non_positive_mass_exits_2(argv, key, capsys, tmp_path):
+    code, err = _exit_code([*argv, "--out", str(tmp_path)], capsys)
+    assert code == 2 and f"parameter '{key}'" in err and "must be > 0" in err
+    assert len(err.strip().splitlines()) == 1
+
+
+def test_parameters_declared_positive_are_refused_unless_positive(tmp_path, monkeypatch):
+    folder = tmp_path / "declared"
+    folder.mkdir()
+    (folder / "shapes.py").write_text(
+        '"""Declares its positive parameters."""\n'
+        "from __future__ import annotations\n"
+        "from typing import Annotated\n"
+        "from jrigid.registry import POSITIVE\n"
+        "def main(out_dir, quick=False, *, radius: Annotated[float, POSITIVE] = 1.0,\n"
+        "         sides: Annotated[tuple, POSITIVE] = (1.0, 2.0), shift: float = 0.0,\n"
+        "         body_mass: float = 2.0):\n"
+        "    return {'radius': radius}\n"
+    )
+    monkeypatch.setenv(registry.ENV_VAR, str(folder))
+    main = registry.get("shapes").main
+    assert registry.positive_parameters(main) == {"radius", "sides", "body_mass"}
+    assert "radius=1.0 (float, > 0)" in registry.describe_parameters(main)
+    ok = registry.parse_params("shapes", main, {"radius": "0.5", "shift": "-3", "sides": "1,3"})
+    assert ok == {"radius": 0.5, "shift": -3.0, "sides": (1.0, 3.0)}
+    for key, text in [("radius", "0"), ("radius", "-2"), ("sides", "1,-1"), ("body_mass", "-1")]:
+        with pytest.raises(registry.ParameterError, match=f"'{key}'.*must be > 0"):
+            registry.parse_params("shapes", main, {key: text})
+
+
+@pytest.mark.parametrize("text, default", [("nan", 1.0), ("inf", 1.0), ("1e400", 1.0),
+                                           ("1,nan", (1.0, 2.0)), ("[1e400]", None),
+                                           ("1e400", 1), ("nan", 1)])
+def test_convert_refuses_non_finite_numbers(text, default):
+    with pytest.raises(ValueError):
+        registry.convert(text, default)
+
+
+def test_unwritable_out_exits_2_with_one_line(tmp_path, capsys):
+    """A results folder that cannot be created used to end in a traceback."""
+    a_file = tmp_path / "a_file"
+    a_file.write_text("x")
+    for out in (a_file, a_file / "below"):
+        code, err = _exit_code(["run", "hello", "--quick", "--out", str(out)], capsys)
+        assert code == 2 and "cannot write results to" in err and str(out) in err
+        assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+        code, err = _exit_code(["run", "all", "--quick", "--out", str(out)], capsys)
+        assert code == 2 and "cannot write results to" in err
+    assert a_file.read_text() == "x"
+
+
 def test_stray_arguments_exit_2(capsys):
     code, err = _exit_code(["run", "hello", "--bogus"], capsys)
     assert code == 2 and "unrecognized arguments: --bogus" in err

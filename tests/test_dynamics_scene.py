@@ -51,6 +51,83 @@ def test_body_rejects_nonphysical_inertia():
     assert body.allow_nonphysical
 
 
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"moments": jnp.ones((2, 3))}, r"moments must have shape \(3,\), got \(2, 3\)"),
+        ({"moments": jnp.ones((1, 3))}, r"moments must have shape \(3,\)"),
+        ({"mass": jnp.ones(3)}, r"mass must have shape \(\), got \(3,\)"),
+        ({"com": jnp.ones((2, 3))}, r"com must have shape \(3,\)"),
+        ({"com": jnp.ones(2)}, r"com must have shape \(\.\.\., 3\)"),
+        ({"frame": jnp.ones(3)}, r"frame must have shape \(\.\.\., 4\)"),
+        ({"frame": jnp.zeros(4)}, r"frame must be a unit quaternion.*norm 0\)"),
+        ({"frame": jnp.array([2.0, 0.0, 0.0, 0.0])}, "frame must be a unit quaternion"),
+        ({"frame": jnp.array([1.0, jnp.nan, 0.0, 0.0])}, "frame must be a unit quaternion"),
+        ({"mass": jnp.inf}, "mass must be finite and positive"),
+    ],
+)
+def test_body_rejects_batches_vector_mass_and_bad_frames(kwargs, match):
+    args = {"moments": jnp.array([1.0, 1.5, 2.0]), **kwargs}
+    with pytest.raises(ValueError, match=match):
+        RigidBody(**args)
+
+
+def test_body_shape_errors_are_static_and_frame_errors_reach_jit():
+    with pytest.raises(ValueError, match="moments must have shape"):
+        jax.jit(lambda m: RigidBody(m).moments)(jnp.ones((4, 3)))
+    # Inside a transformation the value checks run in RigidBody.check (as simulate does).
+    run = jax.jit(lambda f: RigidBody(jnp.array([1.0, 1.5, 2.0]), frame=f).check().frame)
+    np.testing.assert_array_equal(run(jnp.array([1.0, 0.0, 0.0, 0.0])), [1.0, 0.0, 0.0, 0.0])
+    with pytest.raises(Exception, match="frame must be a unit quaternion"):
+        jax.block_until_ready(run(jnp.zeros(4)))
+    # Batches of bodies are built inside vmap, where each body has its own (3,) moments.
+    bodies = jax.vmap(RigidBody)(jnp.array([[1.0, 1.5, 2.0], [1.0, 1.0, 1.0]]))
+    assert bodies.moments.shape == (2, 3)
+
+
+def test_body_given_a_tensor_as_moments_points_to_from_tensor():
+    """A non-symmetric 3x3 used to be read as three moment vectors, "not positive definite"."""
+    bad = jnp.array([[1.0, 0.0, 0.0], [3.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    with pytest.raises(ValueError, match="from_tensor") as info:
+        RigidBody(bad)
+    assert "positive definite" not in str(info.value)
+    with pytest.raises(ValueError, match="not symmetric") as info:
+        RigidBody.from_tensor(bad)
+    assert "positive definite" not in str(info.value)
+    with pytest.raises(ValueError, match=r"tensor must have shape \(3, 3\)"):
+        RigidBody.from_tensor(jnp.stack([jnp.eye(3), jnp.eye(3)]))
+
+
+def test_body_accepts_needles():
+    """(1e-12, 1e12, 1e12) is a physical body (a thin rod with a finite radius)."""
+    body = RigidBody(jnp.array([1e-12, 1e12, 1e12]))
+    np.testing.assert_array_equal(body.check().moments, [1e-12, 1e12, 1e12])
+    RigidBody.from_tensor(jnp.diag(jnp.array([1e12, 1e-12, 1e12])))
+
+
+@pytest.mark.parametrize(
+    "g, match",
+    [
+        (jnp.ones(2), r"shape \(3,\), got shape \(2,\)"),
+        (jnp.ones((1, 3)), r"got shape \(1, 3\)"),
+        (jnp.ones((3, 3)), r"got shape \(3, 3\)"),
+        (jnp.ones(4), r"got shape \(4,\)"),
+        (jnp.nan, "g must be finite"),
+        (jnp.array([0.0, jnp.inf, -9.81]), "g must be finite"),
+    ],
+)
+def test_gravity_rejects_wrong_shapes_and_non_finite_values(g, match):
+    with pytest.raises(ValueError, match=match):
+        Gravity(g)
+    np.testing.assert_array_equal(Gravity(2).g, [0.0, 0.0, -2.0])  # ints are fine
+
+
+def test_gravity_shape_check_is_static_under_jit():
+    with pytest.raises(ValueError, match="Gravity: g must be"):
+        jax.jit(lambda g: Gravity(g).g)(jnp.ones(2))
+    np.testing.assert_array_equal(jax.jit(lambda g: Gravity(g).g)(1.5), [0.0, 0.0, -1.5])
+
+
 def test_body_from_tensor_diagonalises_and_keeps_frame():
     rng = np.random.default_rng(0)
     frame = scipy_rot(rng.normal(size=4))
@@ -172,6 +249,15 @@ def test_from_omega_rejects_bad_quaternions():
     # A non-unit quaternion is normalised.
     s = initial.from_omega(jnp.array([2.0, 0.0, 0.0, 0.0]), jnp.ones(3))
     np.testing.assert_allclose(s.q, [1.0, 0.0, 0.0, 0.0])
+
+
+@pytest.mark.parametrize("scale", [1e-300, 1e300])
+def test_from_omega_normalises_quaternions_of_any_scale(scale):
+    """The orientation used to become zeros (1e300) or be refused as zero (1e-300)."""
+    q = np.array([0.5, -0.5, 0.5, 0.5])
+    s = initial.from_omega(scale * q, jnp.array([0.1, 0.2, 0.3]))
+    np.testing.assert_allclose(s.q, q, rtol=1e-15)
+    np.testing.assert_allclose(s.omega, [0.1, 0.2, 0.3], rtol=1e-14)
 
 
 def test_from_euler_rates_matches_derivative_of_from_euler():

@@ -465,3 +465,112 @@ def test_float32_path(float32):
     np.testing.assert_allclose(w, np.sort(np.asarray(moments)), rtol=1e-5, atol=1e-6)
     with pytest.raises(ValueError, match="triangle"):
         inertia.validate(jnp.array(HLW, dtype=jnp.float32))
+
+
+# --------------------------------------------------------------------------- scale-free checks
+
+
+@pytest.mark.parametrize(
+    "moments",
+    [(1e-12, 1e12, 1e12), (1e12, 1e-12, 1e12), (3e-9, 2.0, 2.0), (1e-200, 1e200, 1e200)],
+)
+def test_needles_of_any_aspect_ratio_are_physical(moments):
+    """Positive definiteness does not compare the smallest moment with the largest.
+
+    A needle of length L and radius r has moments (m r²/2, m L²/12, m L²/12): its ratio
+    is unbounded, and the old test ``lo > 3 eps hi`` refused it below r/L ≈ 1e-8.
+    """
+    m = jnp.array(moments)
+    np.testing.assert_array_equal(inertia.validate(m), m)
+    inertia.validate(inertia.to_tensor(m))  # diagonal tensor: exact eigenvalues
+    jax.block_until_ready(jax.jit(inertia.check)(m))
+    # A solid cylinder that thin, built from its dimensions, passes too.
+    inertia.validate(inertia.solid_cylinder(1.0, 1e-9, 1.0))
+
+
+def test_positive_definiteness_of_a_tensor_ignores_the_units_of_each_axis():
+    """diag(s) I diag(s) is positive definite exactly when I is: the verdict is unchanged."""
+    rng = np.random.default_rng(4)
+    q = Rotation.random(random_state=rng).as_quat(scalar_first=True)
+    tensor = inertia.rotate_tensor(inertia.to_tensor(jnp.array([1.0, 1.5, 2.0])), q)
+    for s in ([1e-6, 1.0, 1e6], [1e5, 1e5, 1e-5]):
+        scaled = jnp.diag(jnp.array(s)) @ tensor @ jnp.diag(jnp.array(s))
+        inertia.validate(scaled, allow_nonphysical=True)
+    # Still refused: a semi-definite (rod) tensor after a rotation, and negative moments.
+    rod = inertia.rotate_tensor(inertia.to_tensor(inertia.thin_rod(1.0, 2.0)), q)
+    with pytest.raises(ValueError, match="positive definite"):
+        inertia.validate(rod)
+    with pytest.raises(ValueError, match="positive definite"):
+        inertia.validate(jnp.diag(jnp.array([1.0, -1e-30, 1.0])), allow_nonphysical=True)
+
+
+def test_non_symmetric_tensor_is_reported_as_non_symmetric_only():
+    """Each element is reported under its first failed condition (its symmetric part here
+    is also indefinite), in validate, under jit and in a batch."""
+    bad = jnp.array([[1.0, 0.0, 0.0], [3.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    assert np.linalg.eigvalsh(0.5 * (bad + bad.T))[0] < 0
+    with pytest.raises(ValueError, match="not symmetric"):
+        inertia.validate(bad)
+    with pytest.raises(Exception, match="not symmetric") as info:
+        jax.block_until_ready(eqx.filter_jit(inertia.check)(bad))
+    assert "positive definite" not in str(info.value)
+    batch = jnp.stack([jnp.eye(3), bad])
+    with pytest.raises(ValueError, match=r"not symmetric at batch index \(1,\)"):
+        inertia.validate(batch)
+    with pytest.raises(Exception, match="not symmetric"):
+        jax.block_until_ready(jax.vmap(inertia.check)(batch))
+
+
+# --------------------------------------------------------------------------- shape functions
+
+
+@pytest.mark.parametrize(
+    "call, match",
+    [
+        (lambda: inertia.box(-1.0, 1.0, 1.0, 1.0), "mass must be finite and > 0"),
+        (lambda: inertia.box(0.0, 1.0, 1.0, 1.0), "mass must be finite and > 0"),
+        (lambda: inertia.box(1.0, 1.0, -2.0, 1.0), "b must be finite and >= 0"),
+        (lambda: inertia.sphere(jnp.nan, 1.0), "mass must be finite"),
+        (lambda: inertia.sphere(1.0, jnp.inf), "r must be finite"),
+        (lambda: inertia.ellipsoid(1.0, 1.0, 1.0, -1.0), "c must be"),
+        (lambda: inertia.thin_rod(1.0, -2.0), "length must be"),
+        (lambda: inertia.thin_disk(jnp.array([1.0, -1.0]), 1.0), "mass must be"),
+        (lambda: inertia.thin_plate(1.0, -1.0, 1.0), "a must be"),
+        (lambda: inertia.solid_cylinder(1.0, 1.0, -1.0), "h must be"),
+        (lambda: inertia.disk(-1.0, 1.0, 0.1), "mass must be"),
+        (lambda: inertia.parallel_axis(jnp.eye(3), -2.0, jnp.ones(3)), "mass must be"),
+        (lambda: inertia.from_point_masses(jnp.array([1.0, -1.0]), jnp.ones((2, 3))), "masses"),
+        (lambda: inertia.from_point_masses(jnp.zeros(2), jnp.ones((2, 3))), "all be zero"),
+        (lambda: inertia.from_point_masses(jnp.ones(2), jnp.full((2, 3), jnp.nan)), "positions"),
+    ],
+)
+def test_shapes_refuse_non_physical_mass_and_sizes(call, match):
+    with pytest.raises(ValueError, match=match):
+        call()
+
+
+def test_shape_function_checks_run_under_jit():
+    f = jax.jit(inertia.box)
+    np.testing.assert_allclose(f(12.0, 1.0, 2.0, 3.0), [13.0, 10.0, 5.0])
+    with pytest.raises(Exception, match="mass must be finite and > 0"):
+        jax.block_until_ready(f(-12.0, 1.0, 2.0, 3.0))
+
+
+@pytest.mark.parametrize(
+    "call, expected",
+    [
+        (lambda: inertia.to_tensor(jnp.ones(4)), r"moments must have shape \(\.\.\., 3\)"),
+        (lambda: inertia.validate(jnp.ones((3, 4))), r"\(\.\.\., 3\)"),
+        (lambda: inertia.rotate_tensor_by_matrix(jnp.eye(3), jnp.eye(4)),
+         r"R must have shape \(\.\.\., 3, 3\)"),
+        (lambda: inertia.principal_axes(jnp.ones((2, 3))), r"\(\.\.\., 3, 3\).*to_tensor"),
+        (lambda: inertia.rotate_tensor(jnp.eye(3), jnp.ones(5)), r"\(\.\.\., 4\)"),
+        (lambda: inertia.parallel_axis(jnp.ones(3), 1.0, jnp.ones(3)), r"I_cm must have shape"),
+        (lambda: inertia.from_point_masses(jnp.ones(3), jnp.ones(3)), r"\(\.\.\., N, 3\)"),
+        (lambda: inertia.from_point_masses(jnp.ones(3), jnp.ones((3, 3)), jnp.ones(2)),
+         r"origin must have shape \(\.\.\., 3\)"),
+    ],
+)
+def test_shape_errors_name_the_expected_trailing_shape(call, expected):
+    with pytest.raises(ValueError, match=expected):
+        call()

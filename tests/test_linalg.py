@@ -34,3 +34,20 @@ def test_broadcasting_batch_shapes():
 
 def test_singular_solve_is_not_finite():
     assert not np.all(np.isfinite(linalg.solve3(jnp.zeros((3, 3)), jnp.ones(3))))
+
+
+def test_unit_matches_numpy_and_the_scale_safe_normalize():
+    """linalg.unit is the integrators' lean form of quaternion.normalize: equal bit for
+    bit at moderate scale; only normalize survives extreme norms."""
+    from jrigid import quaternion as quat
+
+    q = RNG.normal(size=(6, 4))
+    u = linalg.unit(jnp.asarray(q))
+    np.testing.assert_allclose(u, q / np.linalg.norm(q, axis=-1, keepdims=True), rtol=1e-15)
+    np.testing.assert_array_equal(u, quat.normalize(q))
+    assert linalg.unit(jnp.asarray(RNG.normal(size=3))).shape == (3,)
+    assert np.isnan(np.asarray(linalg.unit(jnp.zeros(4)))).all()
+    big = 1e300 * q[0]
+    lean = np.asarray(linalg.unit(jnp.asarray(big)))  # |q|² overflows: zeros, not unit
+    assert not np.isclose(np.linalg.norm(lean), 1.0)
+    np.testing.assert_allclose(quat.normalize(big), u[0], rtol=1e-15)

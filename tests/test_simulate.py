@@ -1,6 +1,7 @@
 """simulate: solvers, formulations, leapfrog, transformations, free flight, failures."""
 
 import logging
+import warnings
 
 import diffrax
 import equinox as eqx
@@ -19,6 +20,7 @@ from jrigid.formulations import EulerAngles
 from jrigid.integrate import Result, SimulationError, simulate
 from jrigid.leapfrog import leapfrog
 from jrigid.scene import FreeFlight, Gravity, Pivot, Scene, Torque
+from jrigid.solve import PrecisionWarning, precision_problem
 from jrigid.state import State
 
 N_OUT = 201  # shared with test_dynamics_analytic so compiled solves are reused
@@ -341,13 +343,45 @@ def test_dense_output():
 
 def test_float32(float32):
     state = initial.from_omega(Q0.astype(jnp.float32), OMEGA0.astype(jnp.float32))
-    traj = simulate(free_scene(), state, jnp.linspace(0.0, 10.0, 21))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", PrecisionWarning)  # a short horizon: no warning
+        traj = simulate(free_scene(), state, jnp.linspace(0.0, 10.0, 21))
     assert traj.q.dtype == jnp.float32
     assert int(traj.result) == 0
     e = np.asarray(traj.kinetic_energy)
     assert np.max(np.abs(e - e[0])) < 1e-5 * e[0]
     with pytest.raises(ValueError, match="machine epsilons"):
         simulate(free_scene(), state, jnp.linspace(0.0, 1.0, 3), rtol=1e-8)
+
+
+def test_float32_warns_once_when_the_horizon_defeats_the_tolerance(float32):
+    """|ω| t_end eps32 = 1.54 · 1e3 · 1.2e-7 = 1.8e-4 > rtol = 1e-5: one warning, at the
+    caller's line, and the solve still runs."""
+    state = initial.from_omega(Q0.astype(jnp.float32), OMEGA0.astype(jnp.float32))
+    with pytest.warns(PrecisionWarning, match=r"float32 resolves times near t = 1000") as got:
+        traj = simulate(free_scene(), state, jnp.linspace(0.0, 1000.0, 21))
+    assert len(got) == 1 and got[0].filename == __file__
+    assert int(traj.result) == 0
+
+
+def test_precision_problem_threshold():
+    """The floor |ω| max|t| eps against rtol; float64 and traced inputs are never examined."""
+    omega = np.array([0.0, 0.0, 2.0])
+    eps32 = float(np.finfo(np.float32).eps)
+    state = initial.from_omega(omega=jnp.asarray(omega, jnp.float32))
+    rtol = jnp.asarray(1e-5, jnp.float32)
+    t_edge = 1e-5 / (2.0 * eps32)  # floor = rtol here
+    for t_end, warns in ((0.9 * t_edge, False), (1.1 * t_edge, True)):
+        ts = jnp.asarray([-1.0, t_end], jnp.float32)
+        assert (precision_problem(state, ts, rtol) is not None) == warns
+    ts = jnp.asarray([-1.1 * t_edge, 0.0], jnp.float32)  # |t0| counts as well
+    assert "coarser than rtol = 1e-05 asks" in precision_problem(state, ts, rtol)
+    tiny_rtol = jnp.asarray(1e-7, jnp.float32)  # below 10 eps: refused by the checks instead
+    assert precision_problem(state, ts, tiny_rtol) is None
+    state64 = initial.from_omega(omega=jnp.asarray(omega))
+    assert precision_problem(state64, jnp.asarray([0.0, 1e12]), jnp.asarray(1e-10)) is None
+    traced = jax.jit(lambda s: precision_problem(s, ts, rtol) is None)
+    assert traced(state)
 
 
 # --------------------------------------------------------------------------- bad input
@@ -538,19 +572,31 @@ def test_max_steps_accepts_numpy_integers_refuses_bools():
         simulate(scene, state, TS[:3], max_steps=True)
 
 
-def test_invalid_members_of_a_vmap_get_their_own_code():
-    """One bad member (zero quaternion, non-physical body) never stops the others."""
-    moments = jnp.array([[1.0, 2.0, 3.0], [1.0, 1.0, 3.0], [1.0, 2.0, 3.0]])
-    qs = jnp.stack([Q0, Q0, jnp.zeros(4)])
+def test_orientation_of_any_scale_integrates_as_the_unit_one():
+    """|q| = 1e300 used to become q = 0 and burn max_steps; 1e-300 was called zero."""
+    state = initial.from_omega(Q0, OMEGA0)
+    ref = simulate(free_scene(), state, TS[:11])
+    for scale in (1e300, 1e-300):
+        traj = simulate(free_scene(), State(scale * state.q, scale * state.qdot), TS[:11])
+        np.testing.assert_allclose(traj.q, ref.q, rtol=0, atol=1e-14)
+        np.testing.assert_allclose(traj.omega, ref.omega, rtol=0, atol=1e-13)
 
-    def run(m, q):
+
+def test_invalid_members_of_a_vmap_get_their_own_code():
+    """One bad member (zero quaternion, non-physical body, zero frame) never stops the
+    others."""
+    moments = jnp.array([[1.0, 2.0, 3.0], [1.0, 1.0, 3.0], [1.0, 2.0, 3.0], [1.0, 2.0, 3.0]])
+    qs = jnp.stack([Q0, Q0, jnp.zeros(4), Q0])
+    frames = jnp.stack([jnp.array([1.0, 0.0, 0.0, 0.0])] * 3 + [jnp.zeros(4)])
+
+    def run(m, q, frame):
         state = initial.from_omega(Q0, OMEGA0)
         state = State(q, state.qdot)
-        return simulate(Scene(RigidBody(m)), state, TS[:11], throw=False)
+        return simulate(Scene(RigidBody(m, frame=frame)), state, TS[:11], throw=False)
 
-    trajs = jax.vmap(run)(moments, qs)
+    trajs = jax.vmap(run)(moments, qs, frames)
     np.testing.assert_array_equal(trajs.result, [Result.success, Result.invalid_input,
-                                                 Result.invalid_input])
+                                                 Result.invalid_input, Result.invalid_input])
     assert np.isnan(np.asarray(trajs.q[1:])).all()
     alone = simulate(free_scene(), initial.from_omega(Q0, OMEGA0), TS[:11])
     np.testing.assert_allclose(trajs.q[0], alone.q, rtol=0, atol=1e-13)

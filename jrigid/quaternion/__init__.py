@@ -9,10 +9,17 @@ functions. Angular velocity is body frame unless a name says ``space``.
 Modules: ``core`` (algebra, axis-angle, rotation vectors, slerp, kinematics),
 ``matrix`` (matrices, Rodrigues), ``euler`` (Euler angles), ``validate`` (input checks).
 
-Bad input: conversions do not raise on bad values (a zero quaternion gives NaN);
-:func:`check_quaternion` and :func:`check_rotation_matrix` raise ``ValueError`` on
-concrete input and use ``equinox.error_if`` under ``jit``. Invalid Euler sequences and
-wrong shapes always raise ``ValueError``.
+Bad input:
+
+* wrong trailing shapes always raise ``ValueError`` naming the expected shape (a static
+  check, free under ``jit``), as do invalid Euler sequences;
+* conversions do not raise on bad values: a zero or non-finite quaternion gives NaN.
+  Any finite non-zero norm is fine (``1e-300`` to ``1e300``): functions that do not
+  depend on the scale rescale by the largest component before squaring;
+* :func:`from_matrix` refuses a reflection or a matrix far from orthogonal: ``ValueError``
+  for concrete input, NaN under ``jit``/``vmap``/``grad`` (see its docstring);
+* :func:`check_quaternion` and :func:`check_rotation_matrix` raise ``ValueError`` on
+  concrete input and use ``equinox.error_if`` under ``jit``.
 """
 
 from .core import (

@@ -8,25 +8,34 @@ is body frame unless a name says ``space``; ``q̇ = ½ q ⊗ (0, ω_body)`` (eq.
 Every function broadcasts over leading batch dimensions (explicitly, so it also works
 with ``jax_numpy_rank_promotion="raise"``), and has finite gradients at the identity
 and at 180° rotations (Taylor branches plus the double-``where`` trick).
+
+Every function checks the trailing shape of its arguments while tracing (free under
+``jit``) and raises ``ValueError`` naming the expected shape, e.g. ``(..., 4)`` for a
+quaternion. Functions that do not depend on the scale of ``q`` (``normalize``, ``norm``,
+``inverse``, the conversions) rescale by the largest component before squaring, so they
+are exact for any finite non-zero norm, ``1e-300`` and ``1e300`` included.
 """
 
 from __future__ import annotations
 
+import operator
 from collections.abc import Sequence
 
 import jax
 import jax.numpy as jnp
-from jax import lax
 from jax.typing import ArrayLike
 
 from ._utils import (
-    as_float,
     as_float_pair,
     broadcast_batch,
     cross,
     dot,
     epsilon,
+    quaternion_arg,
+    rescale,
     safe_norm,
+    unit,
+    vector_arg,
 )
 
 __all__ = [
@@ -70,8 +79,17 @@ def identity(batch_shape: Sequence[int] = (), dtype=None) -> jax.Array:
 
     Returns:
         ``(*batch_shape, 4)`` array.
+
+    Raises:
+        ValueError: if ``batch_shape`` is not a sequence of non-negative integers.
     """
-    shape = tuple(batch_shape) + (4,)
+    try:
+        shape = tuple(operator.index(n) for n in batch_shape)
+    except TypeError:
+        shape = (-1,)
+    if any(n < 0 for n in shape):
+        raise ValueError(f"batch_shape must be a sequence of integers >= 0, got {batch_shape!r}")
+    shape = shape + (4,)
     return jnp.zeros(shape, dtype=dtype).at[..., 0].set(1)
 
 
@@ -88,7 +106,7 @@ def multiply(p: ArrayLike, q: ArrayLike) -> jax.Array:
     Returns:
         ``(..., 4)`` product.
     """
-    p, q = as_float_pair(p, q)
+    p, q = as_float_pair(quaternion_arg(p, "p"), quaternion_arg(q, "q"))
     p, q = broadcast_batch(p, 1, q, 1)
     # Component by component: fewer kernels inside an integrator's loop on a CPU.
     p0, p1, p2, p3 = (p[..., i] for i in range(4))
@@ -113,7 +131,7 @@ def conjugate(q: ArrayLike) -> jax.Array:
     Returns:
         ``(..., 4)``.
     """
-    q = as_float(q)
+    q = quaternion_arg(q)
     return jnp.concatenate([q[..., :1], -q[..., 1:]], axis=-1)
 
 
@@ -124,17 +142,22 @@ def norm(q: ArrayLike) -> jax.Array:
         q: ``(..., 4)``.
 
     Returns:
-        ``(...)`` norms.
+        ``(...)`` norms (exact for any finite scale: no overflow at ``|q| = 1e300``;
+        NaN if ``q`` has a NaN or infinite entry).
     """
-    return safe_norm(as_float(q))
+    return safe_norm(quaternion_arg(q))
 
 
 def normalize(q: ArrayLike) -> jax.Array:
     """Scale ``q`` to unit norm.
 
-    A zero quaternion has no direction: the result is NaN (no error is raised, so
-    that the function stays traceable). Use :func:`check_quaternion` to reject
-    such input with a clear error.
+    Any finite non-zero norm works (``1e-300`` and ``1e300`` too): ``q`` is divided by
+    its largest component first when its squares would underflow or overflow. A zero
+    quaternion has no direction: the result is NaN (no error is raised, so that the
+    function stays traceable); non-finite input gives NaN. Use :func:`check_quaternion`
+    to reject such input with a clear error. Where ``|q|`` is moderate the result is
+    bit for bit :func:`jrigid.linalg.unit`'s ``q * rsqrt(q·q)``, the lean form the
+    integrators use on their (already nearly unit) states.
 
     Args:
         q: ``(..., 4)``.
@@ -142,18 +165,14 @@ def normalize(q: ArrayLike) -> jax.Array:
     Returns:
         ``(..., 4)`` unit quaternion.
     """
-    q = as_float(q)
-    # One rsqrt, not a division by sqrt: XLA rewrites ``q / sqrt(s)`` into
-    # ``q * rsqrt(s)`` only where the sqrt has no other use, so the same step rounded
-    # differently when recomputed inside a reverse pass (where the sqrt is reused),
-    # and checkpointed gradients through projected solves drifted (up to 1e-3).
-    return q * lax.rsqrt(dot(q, q)[..., None])
+    return unit(quaternion_arg(q))
 
 
 def inverse(q: ArrayLike) -> jax.Array:
     """Multiplicative inverse ``q* / |q|²`` (equals the conjugate for unit ``q``).
 
-    A zero quaternion gives NaN (see :func:`check_quaternion`).
+    A zero quaternion gives NaN (see :func:`check_quaternion`). Safe for any finite
+    scale of ``q`` (the result overflows only where ``1/|q|`` does).
 
     Args:
         q: ``(..., 4)``.
@@ -161,21 +180,29 @@ def inverse(q: ArrayLike) -> jax.Array:
     Returns:
         ``(..., 4)``.
     """
-    q = as_float(q)
-    return conjugate(q) / dot(q, q)[..., None]
+    q, s = rescale(quaternion_arg(q))
+    return conjugate(q) / (s * dot(q, q)[..., None])
 
 
 def canonicalize(q: ArrayLike) -> jax.Array:
-    """Representative of ``±q`` with non-negative scalar part.
+    """The representative of ``±q`` that scipy's ``Rotation`` calls canonical.
+
+    ``w > 0``; at a 180° rotation (``w = 0``) the first non-zero of ``x, y, z`` is made
+    positive, as in ``Rotation.as_quat(canonical=True)``. So ``canonicalize(q)`` and
+    ``canonicalize(-q)`` are equal, bit for bit, for every ``q`` (``-0.0`` counts as zero).
 
     Args:
         q: ``(..., 4)``.
 
     Returns:
-        ``(..., 4)``, ``q`` or ``-q``, whichever has ``w >= 0``.
+        ``(..., 4)``, ``q`` or ``-q``.
     """
-    q = as_float(q)
-    return jnp.where(q[..., :1] < 0, -q, q)
+    q = quaternion_arg(q)
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    flip = (w < 0) | (
+        (w == 0) & ((x < 0) | ((x == 0) & ((y < 0) | ((y == 0) & (z < 0)))))
+    )
+    return jnp.where(flip[..., None], -q, q)
 
 
 # ---------------------------------------------------------------------------
@@ -196,7 +223,7 @@ def rotate(q: ArrayLike, v: ArrayLike) -> jax.Array:
     Returns:
         ``(..., 3)`` rotated vector.
     """
-    q, v = as_float_pair(q, v)
+    q, v = as_float_pair(quaternion_arg(q), vector_arg(v, "v"))
     q, v = broadcast_batch(q, 1, v, 1)
     w, u = q[..., :1], q[..., 1:]
     return (
@@ -228,16 +255,16 @@ def from_axis_angle(axis: ArrayLike, angle: ArrayLike) -> jax.Array:
     """Quaternion ``(cos θ/2, u sin θ/2)`` of a rotation by ``angle`` about ``axis`` (eq. 17.25).
 
     Args:
-        axis: ``(..., 3)`` rotation axis; it is normalised here. A zero axis gives NaN
-            in the vector part.
+        axis: ``(..., 3)`` rotation axis; it is normalised here (any finite non-zero
+            length). A zero axis gives NaN in the vector part.
         angle: ``(...)`` angle in radians (right-hand rule); broadcasts with ``axis``.
 
     Returns:
         ``(..., 4)`` unit quaternion.
     """
-    axis, angle = as_float_pair(axis, angle)
+    axis, angle = as_float_pair(vector_arg(axis, "axis"), angle)
     axis, angle = broadcast_batch(axis, 1, angle, 0)
-    u = axis / jnp.sqrt(jnp.sum(axis * axis, axis=-1, keepdims=True))
+    u = unit(axis)
     half = 0.5 * angle
     return jnp.concatenate([jnp.cos(half)[..., None], jnp.sin(half)[..., None] * u], axis=-1)
 
@@ -249,7 +276,9 @@ def to_axis_angle(q: ArrayLike) -> tuple[jax.Array, jax.Array]:
     derivative at ``q0 = ±1``; here ``θ = 2 atan2(|q|, |q0|)``, which is accurate
     everywhere and returns ``θ ∈ [0, π]`` (``q`` is first replaced by ``-q`` if
     ``q0 < 0``). For the identity the axis is undefined; ``(1, 0, 0)`` is returned
-    and the gradient there is finite. ``q`` need not be exactly unit.
+    and the gradient there is finite. ``q`` need not be unit (any finite non-zero scale);
+    the zero quaternion gives NaN.
+    At exactly 180° the axis follows :func:`canonicalize`, so ``q`` and ``-q`` agree.
 
     Args:
         q: ``(..., 4)``.
@@ -257,22 +286,27 @@ def to_axis_angle(q: ArrayLike) -> tuple[jax.Array, jax.Array]:
     Returns:
         ``(axis, angle)``: ``(..., 3)`` unit axis and ``(...)`` angle in ``[0, π]``.
     """
-    q = canonicalize(q)
+    q = canonicalize(rescale(quaternion_arg(q))[0])
     w, v = q[..., 0], q[..., 1:]
-    n2 = jnp.sum(v * v, axis=-1)
+    n2 = dot(v, v)
     nonzero = n2 > 0
     n = jnp.sqrt(jnp.where(nonzero, n2, jnp.ones_like(n2)))
     default = jnp.zeros_like(v).at[..., 0].set(1)
     axis = jnp.where(nonzero[..., None], v / n[..., None], default)
     angle = 2.0 * jnp.arctan2(jnp.where(nonzero, n, jnp.zeros_like(n)), w)
-    return axis, angle
+    # The zero quaternion is no rotation and a non-finite one (all NaN after rescale)
+    # has no direction: NaN, like normalize.
+    bad = (~nonzero & (w == 0)) | jnp.isnan(w)
+    return jnp.where(bad[..., None], jnp.nan, axis), jnp.where(bad, jnp.nan, angle)
 
 
 def from_rotvec(rotvec: ArrayLike) -> jax.Array:
     """Exponential map: rotation vector ``θ u`` → unit quaternion.
 
     Uses a Taylor expansion for ``θ² < ε`` so values and gradients are exact and
-    finite at the identity.
+    finite at the identity. The angle is computed without overflow for any finite
+    rotation vector (beyond ``θ ≈ 2π/eps`` its value modulo 2π is lost to rounding; the
+    result is still a unit quaternion).
 
     Args:
         rotvec: ``(..., 3)`` rotation vector (axis times angle in radians).
@@ -280,10 +314,13 @@ def from_rotvec(rotvec: ArrayLike) -> jax.Array:
     Returns:
         ``(..., 4)`` unit quaternion.
     """
-    r = as_float(rotvec)
-    theta2 = jnp.sum(r * r, axis=-1)
+    r = vector_arg(rotvec, "rotvec")
+    r_scaled, s = rescale(r)
+    s = s[..., 0]
+    n2_scaled = dot(r_scaled, r_scaled)
+    theta2 = s * s * n2_scaled  # overflows to inf only where θ is huge: not small then
     small = theta2 < epsilon(r.dtype)
-    theta = jnp.sqrt(jnp.where(small, jnp.ones_like(theta2), theta2))
+    theta = s * jnp.sqrt(jnp.where(small, jnp.ones_like(n2_scaled), n2_scaled))
     theta4 = theta2 * theta2
     w = jnp.where(small, 1.0 - theta2 / 8.0 + theta4 / 384.0, jnp.cos(0.5 * theta))
     k = jnp.where(small, 0.5 - theta2 / 48.0 + theta4 / 3840.0, jnp.sin(0.5 * theta) / theta)
@@ -293,18 +330,22 @@ def from_rotvec(rotvec: ArrayLike) -> jax.Array:
 def to_rotvec(q: ArrayLike) -> jax.Array:
     """Logarithm map: unit quaternion → rotation vector ``θ u`` with ``θ ∈ [0, π]``.
 
-    ``q`` and ``-q`` give the same result (the shorter rotation). Uses a Taylor
-    expansion near the identity so the gradient is finite there; finite at 180° too.
+    ``q`` and ``-q`` give the same result (the shorter rotation); at exactly 180° the
+    direction follows :func:`canonicalize` (scipy's rule), so ``to_rotvec(q)`` and
+    ``to_rotvec(-q)`` are equal there too and match ``Rotation.as_rotvec``. Uses a
+    Taylor expansion near the identity so the gradient is finite there; finite at 180°
+    too.
 
     Args:
-        q: ``(..., 4)``; need not be exactly unit (the result is scale-invariant).
+        q: ``(..., 4)``; need not be unit (the result is scale-invariant, for any finite
+            non-zero norm).
 
     Returns:
         ``(..., 3)`` rotation vector.
     """
-    q = canonicalize(q)
+    q = canonicalize(rescale(quaternion_arg(q))[0])
     w, v = q[..., 0], q[..., 1:]
-    n2 = jnp.sum(v * v, axis=-1)
+    n2 = dot(v, v)
     small = n2 < epsilon(q.dtype) * w * w
     n = jnp.sqrt(jnp.where(small, jnp.ones_like(n2), n2))
     w_safe = jnp.where(small, w, jnp.ones_like(w))
@@ -324,8 +365,9 @@ def distance(p: ArrayLike, q: ArrayLike) -> jax.Array:
         q: ``(..., 4)`` unit quaternion; batch dimensions broadcast.
 
     Returns:
-        ``(...)`` geodesic distance in radians.
+        ``(...)`` geodesic distance in radians (scale-invariant in ``p`` and ``q``).
     """
+    p, q = rescale(quaternion_arg(p, "p"))[0], rescale(quaternion_arg(q))[0]
     return to_axis_angle(multiply(conjugate(q), p))[1]
 
 
@@ -344,7 +386,7 @@ def slerp(p: ArrayLike, q: ArrayLike, t: ArrayLike) -> jax.Array:
     Returns:
         ``(..., 4)`` unit quaternion.
     """
-    p, q = as_float_pair(p, q)
+    p, q = as_float_pair(quaternion_arg(p, "p"), quaternion_arg(q))
     rel = to_rotvec(multiply(conjugate(p), q))
     rel, t = as_float_pair(rel, t)
     rel, t = broadcast_batch(rel, 1, t, 0)
@@ -365,7 +407,7 @@ def from_xyzw(q_xyzw: ArrayLike) -> jax.Array:
     Returns:
         ``(..., 4)``.
     """
-    q = as_float(q_xyzw)
+    q = quaternion_arg(q_xyzw, "q_xyzw")
     return jnp.concatenate([q[..., 3:], q[..., :3]], axis=-1)
 
 
@@ -378,7 +420,7 @@ def to_xyzw(q: ArrayLike) -> jax.Array:
     Returns:
         ``(..., 4)``.
     """
-    q = as_float(q)
+    q = quaternion_arg(q)
     return jnp.concatenate([q[..., 1:], q[..., :1]], axis=-1)
 
 
@@ -404,7 +446,7 @@ def w_matrix(q: ArrayLike) -> jax.Array:
              [-q2, -q3,  q0,  q1],
              [-q3,  q2, -q1,  q0]]
     """
-    q = as_float(q)
+    q = quaternion_arg(q)
     q0, q1, q2, q3 = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     rows = [
         jnp.stack([-q1, q0, q3, -q2], axis=-1),
@@ -429,7 +471,7 @@ def w_matrix_space(q: ArrayLike) -> jax.Array:
              [-q2,  q3,  q0, -q1],
              [-q3, -q2,  q1,  q0]]
     """
-    q = as_float(q)
+    q = quaternion_arg(q)
     q0, q1, q2, q3 = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     rows = [
         jnp.stack([-q1, q0, -q3, q2], axis=-1),
@@ -453,7 +495,7 @@ def derivative(q: ArrayLike, omega_body: ArrayLike) -> jax.Array:
     Returns:
         ``(..., 4)`` time derivative of ``q``.
     """
-    q, omega = as_float_pair(q, omega_body)
+    q, omega = as_float_pair(quaternion_arg(q), vector_arg(omega_body, "omega_body"))
     return 0.5 * multiply(q, _pure(omega))
 
 
@@ -467,7 +509,7 @@ def derivative_space(q: ArrayLike, omega_space: ArrayLike) -> jax.Array:
     Returns:
         ``(..., 4)``.
     """
-    q, omega = as_float_pair(q, omega_space)
+    q, omega = as_float_pair(quaternion_arg(q), vector_arg(omega_space, "omega_space"))
     return 0.5 * multiply(_pure(omega), q)
 
 
@@ -481,7 +523,7 @@ def angular_velocity(q: ArrayLike, qdot: ArrayLike) -> jax.Array:
     Returns:
         ``(..., 3)`` body-frame angular velocity.
     """
-    return 2.0 * multiply(conjugate(q), qdot)[..., 1:]
+    return 2.0 * multiply(conjugate(q), quaternion_arg(qdot, "qdot"))[..., 1:]
 
 
 def angular_velocity_space(q: ArrayLike, qdot: ArrayLike) -> jax.Array:
@@ -494,4 +536,4 @@ def angular_velocity_space(q: ArrayLike, qdot: ArrayLike) -> jax.Array:
     Returns:
         ``(..., 3)`` space-frame angular velocity.
     """
-    return 2.0 * multiply(qdot, conjugate(q))[..., 1:]
+    return 2.0 * multiply(quaternion_arg(qdot, "qdot"), conjugate(q))[..., 1:]

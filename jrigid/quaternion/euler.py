@@ -15,8 +15,9 @@ Gimbal lock: when the second angle is within ``eps`` of a singular value (0 or �
 symmetric sequences, ±π/2 for Tait-Bryan ones) only the sum or difference of the first
 and third angles is defined. Then, as in scipy, the **third angle is set to zero** and
 the first angle carries the whole rotation. No warning is issued (the functions run
-under ``jit``); use :func:`gimbal_lock` to detect the case. The result never contains
-NaN and its gradient is finite (though, at the singularity, not meaningful).
+under ``jit``); use :func:`gimbal_lock` to detect the case. At gimbal lock the result
+contains no NaN and its gradient is finite (though, at the singularity, not meaningful);
+only the zero quaternion, which is no rotation, gives NaN angles.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ import jax
 import jax.numpy as jnp
 from jax.typing import ArrayLike
 
-from ._utils import as_float
+from ._utils import quaternion_arg, rescale, vector_arg
 from .core import multiply
 
 __all__ = ["EULER_SEQUENCES", "from_euler", "gimbal_lock", "to_euler"]
@@ -81,9 +82,7 @@ def from_euler(seq: str, angles: ArrayLike) -> jax.Array:
         ValueError: for an invalid sequence or if ``angles.shape[-1] != 3``.
     """
     axes, extrinsic = _parse(seq)
-    angles = as_float(angles)
-    if angles.ndim < 1 or angles.shape[-1] != 3:
-        raise ValueError(f"angles must have shape (..., 3); got shape {angles.shape}")
+    angles = vector_arg(angles, "angles")
     q0, q1, q2 = (_elementary(ax, angles[..., n]) for n, ax in enumerate(axes))
     if extrinsic:
         return multiply(q2, multiply(q1, q0))
@@ -133,7 +132,7 @@ def gimbal_lock(seq: str, q: ArrayLike, eps: float | None = None) -> jax.Array:
     Returns:
         ``(...)`` boolean array.
     """
-    q = as_float(q)
+    q, _ = rescale(quaternion_arg(q))
     eps = _default_eps(q.dtype) if eps is None else eps
     a, b, c, d, *_ = _components(seq, q)
     _, case1, case2 = _middle_and_cases(a, b, c, d, eps)
@@ -146,7 +145,8 @@ def to_euler(seq: str, q: ArrayLike, eps: float | None = None) -> jax.Array:
     Bernardes & Viollet's direct method: ``q`` is permuted into ``(a, b, c, d)``, the
     second angle is ``2 atan2(|(c, d)|, |(a, b)|)`` (minus π/2 for Tait-Bryan
     sequences), and the others are ``atan2(b, a) ± atan2(d, c)``. At gimbal lock the
-    third angle is set to zero (see the module docstring). ``q`` need not be unit.
+    third angle is set to zero (see the module docstring). ``q`` need not be unit (any
+    finite non-zero scale); the zero quaternion gives NaN.
 
     Args:
         seq: one of :data:`EULER_SEQUENCES` (static).
@@ -157,9 +157,9 @@ def to_euler(seq: str, q: ArrayLike, eps: float | None = None) -> jax.Array:
         ``(..., 3)`` angles in radians, in sequence order.
 
     Raises:
-        ValueError: for an invalid sequence.
+        ValueError: for an invalid sequence or if ``q.shape[-1] != 4``.
     """
-    q = as_float(q)
+    q, _ = rescale(quaternion_arg(q))
     eps = _default_eps(q.dtype) if eps is None else eps
     a, b, c, d, extrinsic, symmetric, sign = _components(seq, q)
     middle, case1, case2 = _middle_and_cases(a, b, c, d, eps)
@@ -188,4 +188,6 @@ def to_euler(seq: str, q: ArrayLike, eps: float | None = None) -> jax.Array:
     # Only the first and third angles wrap to [-π, π); the middle one already lies in
     # [0, π] (symmetric) or [-π/2, π/2] (Tait-Bryan), and wrapping it would turn π into -π.
     first, third = (jnp.remainder(a + math.pi, 2.0 * math.pi) - math.pi for a in (first, third))
-    return jnp.stack([first, middle, third], axis=-1)
+    angles = jnp.stack([first, middle, third], axis=-1)
+    zero = jnp.all(q == 0, axis=-1, keepdims=True)  # no rotation: NaN, as in normalize
+    return jnp.where(zero, jnp.nan, angles)

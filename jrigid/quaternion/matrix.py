@@ -14,7 +14,21 @@ import jax
 import jax.numpy as jnp
 from jax.typing import ArrayLike
 
-from ._utils import as_float, as_float_all, as_float_pair, broadcast_batch
+from ._utils import (
+    as_float,
+    as_float_all,
+    as_float_pair,
+    broadcast_batch,
+    cross,
+    dot,
+    is_traced,
+    matrix_arg,
+    quaternion_arg,
+    rescale,
+    unit,
+    vector_arg,
+)
+from .validate import default_atol
 
 __all__ = [
     "from_matrix",
@@ -31,7 +45,9 @@ def to_matrix(q: ArrayLike) -> jax.Array:
     """Active rotation matrix of a quaternion (the transpose of the chapter's eq. 17.28).
 
     ``q`` need not be unit: it is normalised implicitly (the factor ``2/|q|²``), as
-    scipy does. A zero quaternion gives NaN (see :func:`check_quaternion`).
+    scipy does, for any finite non-zero scale (``q`` is divided by its largest
+    component first where squaring it would overflow or underflow). A zero quaternion
+    gives NaN (see :func:`check_quaternion`).
 
     Args:
         q: ``(..., 4)`` quaternion ``(w, x, y, z)``.
@@ -39,7 +55,7 @@ def to_matrix(q: ArrayLike) -> jax.Array:
     Returns:
         ``(..., 3, 3)`` matrix ``R`` with ``R @ v = rotate(q, v)`` for unit ``q``.
     """
-    q = as_float(q)
+    q, _ = rescale(quaternion_arg(q))
     w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     s = 2.0 / (w * w + x * x + y * y + z * z)
     xx, yy, zz = s * x * x, s * y * y, s * z * z
@@ -53,7 +69,13 @@ def to_matrix(q: ArrayLike) -> jax.Array:
     return jnp.stack(rows, axis=-2)
 
 
-def from_matrix(matrix: ArrayLike) -> jax.Array:
+def _det3(m: jax.Array) -> jax.Array:
+    """Determinant of ``(..., 3, 3)`` by cofactors (cheap, differentiable)."""
+    a, b, c = m[..., 0, :], m[..., 1, :], m[..., 2, :]
+    return dot(a, cross(b, c))
+
+
+def from_matrix(matrix: ArrayLike, *, atol: float | None = None) -> jax.Array:
     """Unit quaternion of an active rotation matrix (Shepperd's method).
 
     Of the four equivalent expressions (pivoting on ``w``, ``x``, ``y`` or ``z``)
@@ -61,19 +83,54 @@ def from_matrix(matrix: ArrayLike) -> jax.Array:
     proper rotation, 180° rotations included, is converted accurately; the other
     branches are kept finite so that gradients never contain NaN.
 
-    ``matrix`` is assumed to be a rotation. A slightly non-orthogonal input (e.g.
-    after accumulated rounding) gives the normalised Shepperd estimate, which agrees
-    with the nearest rotation to first order in the error. For inputs that may be far
-    from a rotation, call :func:`project_to_rotation` first (nearest rotation in the
-    Frobenius norm) or :func:`check_rotation_matrix` to raise an error.
+    Input that is not a rotation is refused, never turned silently into one:
+
+    * orthogonal within ``atol`` (``max |RᵀR - 1| ≤ atol``) and ``det R > 0``: converted.
+      A slightly non-orthogonal input (accumulated rounding) gives the normalised
+      Shepperd estimate, which agrees with the nearest rotation to first order;
+    * further from orthogonal (e.g. a scaled or sheared matrix): not converted. Call
+      :func:`project_to_rotation` first to use the nearest rotation instead;
+    * a reflection (orthogonal with ``det R = -1``): not converted; no rotation
+      corresponds to it.
+
+    "Not converted" means: with concrete input, ``ValueError`` naming the problem;
+    under a JAX transformation (``jit``, ``vmap``, ``grad``: traced input, where no
+    Python error can depend on values) the result is NaN for those matrices. Non-finite
+    input gives NaN.
 
     Args:
         matrix: ``(..., 3, 3)`` rotation matrix.
+        atol: orthogonality tolerance; default
+            :func:`~jrigid.quaternion.default_atol` of the dtype (``1e-6`` in float64).
 
     Returns:
         ``(..., 4)`` unit quaternion (sign not canonicalised).
+
+    Raises:
+        ValueError: wrong shape (always); with concrete input, a matrix that is not
+            orthogonal within ``atol`` or that is a reflection.
     """
-    m = as_float(matrix)
+    m = matrix_arg(matrix)
+    tol = default_atol(m.dtype) if atol is None else atol
+    gram = jnp.swapaxes(m, -1, -2) @ m
+    eye = jnp.broadcast_to(jnp.eye(3, dtype=m.dtype), gram.shape)
+    ortho_err = jnp.max(jnp.abs(gram - eye), axis=(-2, -1))
+    skewed = ortho_err > tol
+    reflection = ~skewed & (_det3(m) < 0)
+    if not is_traced(m):
+        for bad, what in (
+            (skewed, f"is not orthogonal (max |RᵀR - 1| > {tol:g}); use "
+             "jrigid.quaternion.project_to_rotation for the nearest rotation"),
+            (reflection, "is a reflection (det R = -1), not a rotation"),
+        ):
+            if bool(jnp.any(bad)):
+                where = f" at batch index {tuple(int(i) for i in jnp.argwhere(bad)[0])}"
+                raise ValueError(f"from_matrix: matrix{where if bad.ndim else ''} {what}")
+    q = _shepperd(m)
+    return jnp.where((skewed | reflection)[..., None], jnp.nan, q)
+
+
+def _shepperd(m: jax.Array) -> jax.Array:
     m00, m01, m02 = m[..., 0, 0], m[..., 0, 1], m[..., 0, 2]
     m10, m11, m12 = m[..., 1, 0], m[..., 1, 1], m[..., 1, 2]
     m20, m21, m22 = m[..., 2, 0], m[..., 2, 1], m[..., 2, 2]
@@ -142,9 +199,13 @@ def project_to_rotation(matrix: ArrayLike) -> jax.Array:
         matrix: ``(..., 3, 3)`` any real matrix.
 
     Returns:
-        ``(..., 3, 3)`` rotation matrix.
+        ``(..., 3, 3)`` rotation matrix; NaN for a matrix with a NaN or infinite entry
+        (which is kept away from the SVD: LAPACK's SVD does not return on infinite input).
     """
-    return _special_polar(as_float(matrix))
+    m = matrix_arg(matrix)
+    finite = jnp.all(jnp.isfinite(m), axis=(-2, -1))[..., None, None]
+    eye = jnp.broadcast_to(jnp.eye(3, dtype=m.dtype), m.shape)
+    return jnp.where(finite, _special_polar(jnp.where(finite, m, eye)), jnp.nan)
 
 
 def rodrigues_matrix(axis: ArrayLike, angle: ArrayLike) -> jax.Array:
@@ -154,15 +215,16 @@ def rodrigues_matrix(axis: ArrayLike, angle: ArrayLike) -> jax.Array:
     ``r`` the unit axis; equal to ``to_matrix(from_axis_angle(axis, angle))``.
 
     Args:
-        axis: ``(..., 3)`` rotation axis; normalised here (a zero axis gives NaN entries).
+        axis: ``(..., 3)`` rotation axis; normalised here (any finite non-zero length; a
+            zero axis gives NaN entries).
         angle: ``(...)`` angle in radians; broadcasts with ``axis``.
 
     Returns:
         ``(..., 3, 3)`` active rotation matrix.
     """
-    axis, angle = as_float_pair(axis, angle)
+    axis, angle = as_float_pair(vector_arg(axis, "axis"), angle)
     axis, angle = broadcast_batch(axis, 1, angle, 0)
-    r = axis / jnp.sqrt(jnp.sum(axis * axis, axis=-1, keepdims=True))
+    r = unit(axis)
     rx, ry, rz = r[..., 0], r[..., 1], r[..., 2]
     c, s = jnp.cos(angle), jnp.sin(angle)
     t = 1.0 - c
@@ -260,8 +322,7 @@ def passive_matrix(q: ArrayLike) -> jax.Array:
     Returns:
         ``(..., 3, 3)``.
     """
-    q = as_float(q)
-    q = q / jnp.sqrt(jnp.sum(q * q, axis=-1, keepdims=True))
+    q = unit(quaternion_arg(q))
     q0, q1, q2, q3 = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     rows = [
         [0.5 - q2 * q2 - q3 * q3, q1 * q2 + q0 * q3, q1 * q3 - q0 * q2],

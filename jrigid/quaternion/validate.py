@@ -18,13 +18,13 @@ Shape errors are static and always raise :class:`ValueError`.
 
 from __future__ import annotations
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jax.typing import ArrayLike
 
-from ._utils import as_float, is_traced
+from jrigid._checks import fail_if
+
+from ._utils import matrix_arg, quaternion_arg, safe_norm
 
 __all__ = ["check_quaternion", "check_rotation_matrix", "default_atol"]
 
@@ -32,14 +32,6 @@ __all__ = ["check_quaternion", "check_rotation_matrix", "default_atol"]
 def default_atol(dtype) -> float:
     """Default tolerance of the checks: ``1e-6`` for float64, ``1e-4`` for float32."""
     return 1e-4 if jnp.finfo(dtype).bits <= 32 else 1e-6
-
-
-def _fail_if(x: jax.Array, bad, message: str) -> jax.Array:
-    if is_traced(x, bad):
-        return eqx.error_if(x, bad, message)
-    if bool(np.any(np.asarray(bad))):
-        raise ValueError(message)
-    return x
 
 
 def check_quaternion(q: ArrayLike, *, unit: bool = True, atol: float | None = None) -> jax.Array:
@@ -58,15 +50,13 @@ def check_quaternion(q: ArrayLike, *, unit: bool = True, atol: float | None = No
         ValueError: wrong shape (always), or, for concrete input, non-finite entries,
             zero norm, or (``unit=True``) a norm further than ``atol`` from one.
     """
-    q = as_float(q)
-    if q.ndim < 1 or q.shape[-1] != 4:
-        raise ValueError(f"a quaternion must have shape (..., 4); got shape {q.shape}")
+    q = quaternion_arg(q)
     tol = default_atol(q.dtype) if atol is None else atol
-    n = jnp.sqrt(jnp.sum(q * q, axis=-1))
-    q = _fail_if(q, ~jnp.all(jnp.isfinite(q)), "quaternion has non-finite (NaN or inf) entries")
-    q = _fail_if(q, n == 0, "zero quaternion: it represents no rotation")
+    n = safe_norm(q)
+    q = fail_if(q, ~jnp.all(jnp.isfinite(q)), "quaternion has non-finite (NaN or inf) entries")
+    q = fail_if(q, n == 0, "zero quaternion: it represents no rotation")
     if unit:
-        q = _fail_if(
+        q = fail_if(
             q,
             jnp.abs(n - 1) > tol,
             f"quaternion is not unit length (tolerance {tol:g}); "
@@ -90,20 +80,18 @@ def check_rotation_matrix(matrix: ArrayLike, *, atol: float | None = None) -> ja
         ValueError: wrong shape (always), or, for concrete input, non-finite entries,
             a non-orthogonal matrix, or a reflection (``det R = -1``).
     """
-    m = as_float(matrix)
-    if m.ndim < 2 or m.shape[-2:] != (3, 3):
-        raise ValueError(f"a rotation matrix must have shape (..., 3, 3); got shape {m.shape}")
+    m = matrix_arg(matrix)
     tol = default_atol(m.dtype) if atol is None else atol
-    m = _fail_if(m, ~jnp.all(jnp.isfinite(m)), "rotation matrix has non-finite entries")
+    m = fail_if(m, ~jnp.all(jnp.isfinite(m)), "rotation matrix has non-finite entries")
     gram = jnp.swapaxes(m, -1, -2) @ m
     eye = jnp.broadcast_to(jnp.eye(3, dtype=m.dtype), gram.shape)
     ortho_err = jnp.max(jnp.abs(gram - eye), axis=(-2, -1))
-    m = _fail_if(
+    m = fail_if(
         m,
         ortho_err > tol,
         f"matrix is not orthogonal (tolerance {tol:g}); "
         "use jrigid.quaternion.project_to_rotation for the nearest rotation",
     )
     det = jnp.linalg.det(m)
-    m = _fail_if(m, jnp.abs(det - 1) > tol, "matrix is not a proper rotation (det R != +1)")
+    m = fail_if(m, jnp.abs(det - 1) > tol, "matrix is not a proper rotation (det R != +1)")
     return m
