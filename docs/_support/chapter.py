@@ -133,6 +133,33 @@ def _checks(root: Path) -> dict[int, list[str]]:
     return {n: sorted(out[n]) for n in EQUATIONS}
 
 
+_EXERCISE = re.compile(r"\b(Problem|Exercise|Project|Table) 17\.(\d+)")
+
+
+def _experiments(root: Path) -> list[str]:
+    """One table row per experiment: name, what it claims (its docstring's first line), and
+    the problems, exercises and equations of the chapter it cites."""
+    rows = []
+    for path in sorted((root / "experiments").glob("*.py")):
+        doc = ast.get_docstring(ast.parse(path.read_text(encoding="utf-8"))) or ""
+        summary = doc.strip().split("\n\n")[0].replace("\n", " ")
+        cited = sorted({f"{kind} 17.{n}" for kind, n in _EXERCISE.findall(doc)})
+        cited += [f"({e})" for e in _ranges(sorted(equations_in(doc)))]
+        summary = summary.replace("|", "\\|")
+        rows.append(f"| `{path.stem}` | {summary} | {', '.join(cited) or '—'} |")
+    return rows
+
+
+def _ranges(numbers: list[int]) -> list[str]:
+    out: list[str] = []
+    for n in numbers:
+        if out and out[-1][1] == n - 1:
+            out[-1] = (out[-1][0], n)
+        else:
+            out.append((n, n))
+    return [f"17.{a}" if a == b else f"17.{a}–17.{b}" for a, b in out]
+
+
 def page(root: Path) -> str:
     """The markdown of the chapter map."""
     objects = _objects(root)
@@ -162,6 +189,16 @@ def page(root: Path) -> str:
             "",
             f"No function cites: {', '.join(missing) or 'none'} (derivation steps or "
             "results the chapter states without an algorithm).",
+            "",
+            "## The experiments",
+            "",
+            "Each experiment (`jrigid list`; `jrigid run NAME [--quick]`) writes figures, "
+            "`numbers.json` and `report.md` to `results/NAME/`, and a test runs its quick mode "
+            "and asserts its claim. What each checks, from its docstring:",
+            "",
+            "| experiment | what it shows | chapter |",
+            "| --- | --- | --- |",
+            *_experiments(root),
             "",
         ]
     )

@@ -166,7 +166,7 @@ fig
 # ## Scaling out
 #
 # The same call runs unchanged on more hardware; what changes is only where the members
-# go.
+# go. (In more detail: [Scaling out](../../scaling_out/).)
 #
 # - **Several devices on one machine.** `devices=None` (the default) splits every chunk
 #   over all of `jax.devices()`: all GPUs of the host, or `K` CPU devices with
