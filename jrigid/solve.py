@@ -83,7 +83,8 @@ class ProjectedSolver(diffrax.AbstractWrappedSolver):
 
     Attributes:
         solver: the wrapped diffrax solver (any; ``isinstance`` checks see through it).
-        formulation: the formulation whose :meth:`project` is applied.
+        formulation: the formulation whose
+            :meth:`~jrigid.formulations.AbstractFormulation.project` is applied.
         invariants: the values to restore (:class:`~jrigid.invariants.Invariants`), or
             ``None`` for the constraint manifold only.
     """
