@@ -1,0 +1,142 @@
+"""The task an executor's worker runs: compute one chunk, write it, return it.
+
+:func:`jrigid.ensemble.run` with ``executor=`` submits one :func:`run_task` per chunk
+that is not on disk yet. The task carries a :class:`Job` (the member function and what
+every chunk shares, serialised once by the driver with ``cloudpickle``, so closures and
+lambdas travel too), the chunk's index and its input arrays. The worker
+
+1. sets JAX's configuration as the driver's (``jax_enable_x64``) and, before its first
+   compilation, JAX's persistent compilation cache (``jax_compilation_cache_dir``): a
+   worker that finds the chunk program in the cache loads it instead of compiling;
+2. compiles the chunk program once (kept for its later tasks; :mod:`jrigid.ensemble.program`)
+   and evaluates the chunk on its first local device;
+3. writes the chunk atomically to ``out_dir`` (:func:`jrigid.ensemble.storage.write_chunk`),
+   tagged with its index and the run's identity, and returns the outputs with its
+   compile time and its name.
+
+A task writes nothing else and holds no lock: a task run twice (a worker lost after
+writing, a resubmitted chunk) writes the same bytes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import os
+import pathlib
+import platform
+import threading
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import jax
+import numpy as np
+
+from jrigid.ensemble import program, storage
+
+__all__ = ["ChunkDone", "Job", "configure", "pack", "run_task"]
+
+
+@dataclasses.dataclass(frozen=True)
+class Job:
+    """What every chunk of one run shares (shipped to workers as bytes, :func:`pack`).
+
+    Attributes:
+        fn, treedef, shared, batch, batched: as in :func:`jrigid.ensemble.program.compiled`.
+        names: the output names.
+        run: the run identity (written into each chunk file).
+        out_dir: the run's folder (a path every worker can write) or ``None``.
+        x64: the driver's ``jax_enable_x64``.
+        compile_cache: folder of JAX's persistent compilation cache, or ``None``.
+    """
+
+    fn: Callable[..., dict[str, Any]]
+    treedef: Any
+    shared: tuple[list[np.ndarray], Any] | None
+    batch: int
+    batched: bool
+    names: tuple[str, ...]
+    run: str
+    out_dir: str | None
+    x64: bool
+    compile_cache: str | None
+
+
+@dataclasses.dataclass(frozen=True)
+class ChunkDone:
+    """A finished chunk: its ``index``, ``outputs`` (``{name: (m, ...)}``), whether the
+    worker wrote it to ``out_dir`` (``written``), the seconds it took to get the program
+    (``compile_seconds``, 0 when reused), to evaluate (``seconds``), and the ``worker``
+    (``host:pid``)."""
+
+    index: int
+    outputs: dict[str, np.ndarray]
+    written: bool
+    compile_seconds: float
+    seconds: float
+    worker: str
+
+
+def pack(job: Job) -> tuple[bytes, str]:
+    """``(payload, key)``: ``job`` serialised with ``cloudpickle`` and its SHA-256."""
+    import cloudpickle
+
+    payload = cloudpickle.dumps(job)
+    return payload, hashlib.sha256(payload).hexdigest()
+
+
+_JOBS: dict[str, Job] = {}
+_JOBS_MAX = 4
+_LOCK = threading.Lock()
+
+
+def _job(payload: bytes, key: str) -> Job:
+    """The unpickled job (one object per run and process, so its program is reused)."""
+    import cloudpickle
+
+    with _LOCK:
+        job = _JOBS.get(key)
+        if job is None:
+            job = cloudpickle.loads(payload)
+            if len(_JOBS) >= _JOBS_MAX:
+                _JOBS.pop(next(iter(_JOBS)))
+            _JOBS[key] = job
+    return job
+
+
+def configure(x64: bool, compile_cache: str | None) -> None:
+    """Set this process's ``jax_enable_x64`` and (if not set yet) the compilation cache."""
+    if bool(jax.config.jax_enable_x64) != bool(x64):
+        jax.config.update("jax_enable_x64", bool(x64))
+    if compile_cache and not jax.config.jax_compilation_cache_dir:
+        jax.config.update("jax_compilation_cache_dir", str(compile_cache))
+
+
+def run_task(payload: bytes, key: str, index: int, leaves: Sequence[np.ndarray]) -> ChunkDone:
+    """Compute chunk ``index`` of the job in ``payload`` on this process's first device.
+
+    Args:
+        payload, key: from :func:`pack`.
+        index: the chunk's index.
+        leaves: the chunk's input arrays (leading axis: its member count).
+
+    Returns:
+        :class:`ChunkDone`.
+    """
+    job = _job(payload, key)
+    configure(job.x64, job.compile_cache)
+    devices = jax.local_devices()[:1]
+    prog, compile_seconds = program.compiled(
+        job.fn, leaves, job.treedef, job.shared, job.batch, devices, job.batched
+    )
+    start = time.perf_counter()
+    shared_leaves = [] if job.shared is None else job.shared[0]
+    out = program.evaluate(prog, leaves, shared_leaves, job.batch, devices, job.names)
+    seconds = time.perf_counter() - start
+    written = False
+    if job.out_dir is not None:
+        storage.write_chunk(pathlib.Path(job.out_dir), index, out, job.run)
+        written = True
+    return ChunkDone(index, out, written, compile_seconds, seconds,
+                     f"{platform.node()}:{os.getpid()}")
