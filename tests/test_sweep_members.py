@@ -1,0 +1,108 @@
+"""One bad member never stops a sweep: invalid inputs and failures in simulate_many.
+
+An invalid member (zero quaternion, NaN angular velocity) gets ``invalid_input`` and NaN
+outputs and the others come out as without it; a member that fails inside a shared-step
+group (its step budget) does not take its group mates with it (the group is solved again
+member by member); the sweep names how many and the first. The same holds for
+``jax.vmap(simulate(..., throw=False))``.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jrigid import RigidBody, Scene, ensemble, initial, simulate
+from jrigid.state import State
+from jrigid.trajectory import Result
+
+SCENE = Scene(RigidBody(jnp.asarray([1.0, 2.0, 3.0])))
+TS = np.linspace(0.0, 10.0, 3)
+
+
+def final(traj):
+    return {"q": traj.q[-1], "omega": traj.omega[-1], "steps": traj.stats["num_steps"]}
+
+
+def states_of(omegas) -> State:
+    return jax.vmap(lambda w: initial.from_omega(None, w))(jnp.asarray(omegas))
+
+
+def spoil(states: State, zero_q: int, nan_omega: int) -> State:
+    q, qdot = np.array(states.q), np.array(states.qdot)
+    q[zero_q] = 0.0
+    qdot[nan_omega, 1] = np.nan
+    return State(jnp.asarray(q), jnp.asarray(qdot))
+
+
+@pytest.mark.parametrize("shared_step", [False, True])
+def test_invalid_members_are_named_and_leave_the_others_alone(shared_step):
+    omegas = np.random.default_rng(0).normal(size=(6, 3))
+    good = states_of(omegas)
+    bad = spoil(good, zero_q=2, nan_omega=4)
+    kwargs = dict(summary=final, chunk_size=8, progress=False, shared_step=shared_step)
+    info: dict = {}
+    with pytest.warns(ensemble.SweepWarning,
+                      match=r"2 of 6 members have invalid input \(first: member 2\)"):
+        out = ensemble.simulate_many(SCENE, bad, TS, info=info, **kwargs)
+    assert out["result"].tolist() == [0, 0, Result.invalid_input, 0, Result.invalid_input, 0]
+    assert np.all(np.isnan(out["omega"][[2, 4]])) and np.all(np.isnan(out["q"][[2, 4]]))
+    assert info["invalid_input"] == 2 and info["first_invalid"] == 2 and info["failed"] == 0
+    keep = [0, 1, 3, 5]
+    if shared_step:
+        # the stand-ins rest (zero error estimate): the group's steps are the others'
+        alone = ensemble.simulate_many(SCENE, states_of(omegas[keep]), TS, **kwargs)
+        np.testing.assert_allclose(out["omega"][keep], alone["omega"], rtol=1e-9, atol=1e-12)
+        np.testing.assert_array_equal(out["steps"][keep], alone["steps"])
+    else:
+        # per member: bit for bit the sweep without the bad members
+        alone = ensemble.simulate_many(SCENE, good, TS, **kwargs)
+        for k in ("q", "omega", "steps", "result"):
+            np.testing.assert_array_equal(out[k][keep], alone[k][keep])
+    # and against an independent solve: the exact solution
+    exact = ensemble.simulate_many(SCENE, states_of(omegas[keep]), TS, summary=final,
+                                   solver="exact", progress=False)
+    np.testing.assert_allclose(out["omega"][keep], exact["omega"], atol=1e-6)
+
+
+def test_failed_member_does_not_take_its_group_with_it():
+    """One fast member exhausts max_steps in a shared-step group: the group is solved
+    again per member; the slow members succeed as they do on their own."""
+    omegas = np.array([[0.3, 0.1, 0.2], [0.1, 0.3, -0.2], [30.0, 10.0, 20.0], [0.2, -0.1, 0.3]])
+    states = states_of(omegas)
+    kwargs = dict(summary=final, chunk_size=4, progress=False, max_steps=200)
+    info: dict = {}
+    with pytest.warns(ensemble.SweepWarning,
+                      match=r"1 of 4 members failed \(first: member 2, result max_steps\)"):
+        shared = ensemble.simulate_many(SCENE, states, TS, info=info, **kwargs)
+    assert info["shared_step"] and info["failed"] == 1 and info["first_failed"] == 2
+    assert shared["result"].tolist() == [0, 0, Result.max_steps, 0]
+    with pytest.warns(ensemble.SweepWarning):
+        per_member = ensemble.simulate_many(SCENE, states, TS, shared_step=False, **kwargs)
+    slow = [0, 1, 3]
+    np.testing.assert_array_equal(shared["steps"][slow], per_member["steps"][slow])
+    np.testing.assert_allclose(shared["omega"][slow], per_member["omega"][slow], rtol=1e-12)
+    # without the fast member the shared step succeeds for the slow ones on its own
+    alone = ensemble.simulate_many(SCENE, states_of(omegas[slow]), TS, chunk_size=4,
+                                   summary=final, progress=False, max_steps=200)
+    assert alone["result"].tolist() == [0, 0, 0]
+
+
+def test_vmap_simulate_throw_false_isolates_an_invalid_member():
+    omegas = np.random.default_rng(1).normal(size=(3, 3))
+    good = states_of(omegas)
+    bad = spoil(good, zero_q=1, nan_omega=1)
+
+    @jax.jit
+    def sweep(states):
+        traj = jax.vmap(lambda s: simulate(SCENE, s, TS, throw=False))(states)
+        return traj.omega[:, -1], traj.result
+
+    w_bad, r_bad = sweep(bad)
+    w_good, r_good = sweep(good)
+    assert np.asarray(r_bad).tolist() == [0, Result.invalid_input, 0]
+    assert np.asarray(r_good).tolist() == [0, 0, 0]
+    assert np.all(np.isnan(np.asarray(w_bad)[1]))
+    np.testing.assert_array_equal(np.asarray(w_bad)[[0, 2]], np.asarray(w_good)[[0, 2]])
