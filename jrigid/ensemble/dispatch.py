@@ -88,8 +88,11 @@ def on_executor(plan: Plan, todo: Sequence[int], executor: cf.Executor,
     workers: dict[str, dict[str, float]] = {}
     if not todo:
         return {"compile_seconds": 0.0, "workers": workers}
+    example = jax.tree_util.tree_unflatten(plan.treedef, [a[:1] for a in plan.leaves])
+    shared = None if plan.shared is None else jax.tree_util.tree_unflatten(
+        plan.shared[1], plan.shared[0])
     job = worker.Job(
-        fn=plan.fn, treedef=plan.treedef, shared=plan.shared, batch=plan.batch,
+        fn=plan.fn, example=example, shared=shared, batch=plan.batch,
         batched=plan.batched, names=tuple(plan.spec), run=plan.run,
         out_dir=None if out_dir is None else str(out_dir.resolve()),
         x64=bool(jax.config.jax_enable_x64), compile_cache=compile_cache,

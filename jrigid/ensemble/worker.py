@@ -42,8 +42,13 @@ __all__ = ["ChunkDone", "Job", "configure", "pack", "run_task"]
 class Job:
     """What every chunk of one run shares (shipped to workers as bytes, :func:`pack`).
 
+    Pytree structures travel as pytrees (``example``, ``shared``), not as treedefs: a
+    treedef of equinox modules does not survive pickling, the modules do.
+
     Attributes:
-        fn, treedef, shared, batch, batched: as in :func:`jrigid.ensemble.program.compiled`.
+        fn, batch, batched: as in :func:`jrigid.ensemble.program.compiled`.
+        example: one member's inputs (a pytree; its structure is the members').
+        shared: the pytree of values common to all members, or ``None``.
         names: the output names.
         run: the run identity (written into each chunk file).
         out_dir: the run's folder (a path every worker can write) or ``None``.
@@ -52,8 +57,8 @@ class Job:
     """
 
     fn: Callable[..., dict[str, Any]]
-    treedef: Any
-    shared: tuple[list[np.ndarray], Any] | None
+    example: Any
+    shared: Any
     batch: int
     batched: bool
     names: tuple[str, ...]
@@ -86,23 +91,30 @@ def pack(job: Job) -> tuple[bytes, str]:
     return payload, hashlib.sha256(payload).hexdigest()
 
 
-_JOBS: dict[str, Job] = {}
+_JOBS: dict[str, tuple[Job, Any, Any]] = {}
 _JOBS_MAX = 4
 _LOCK = threading.Lock()
 
 
-def _job(payload: bytes, key: str) -> Job:
-    """The unpickled job (one object per run and process, so its program is reused)."""
+def _job(payload: bytes, key: str) -> tuple[Job, Any, Any]:
+    """``(job, member treedef, shared (leaves, treedef) or None)``, unpickled once per run
+    and process (so its compiled program is reused)."""
     import cloudpickle
 
     with _LOCK:
-        job = _JOBS.get(key)
-        if job is None:
+        hit = _JOBS.get(key)
+        if hit is None:
             job = cloudpickle.loads(payload)
+            treedef = jax.tree_util.tree_structure(job.example)
+            shared = None
+            if job.shared is not None:
+                leaves, s_treedef = jax.tree_util.tree_flatten(job.shared)
+                shared = ([np.asarray(a) for a in leaves], s_treedef)
+            hit = (job, treedef, shared)
             if len(_JOBS) >= _JOBS_MAX:
                 _JOBS.pop(next(iter(_JOBS)))
-            _JOBS[key] = job
-    return job
+            _JOBS[key] = hit
+    return hit
 
 
 def configure(x64: bool, compile_cache: str | None) -> None:
@@ -124,14 +136,14 @@ def run_task(payload: bytes, key: str, index: int, leaves: Sequence[np.ndarray])
     Returns:
         :class:`ChunkDone`.
     """
-    job = _job(payload, key)
+    job, treedef, shared = _job(payload, key)
     configure(job.x64, job.compile_cache)
     devices = jax.local_devices()[:1]
     prog, compile_seconds = program.compiled(
-        job.fn, leaves, job.treedef, job.shared, job.batch, devices, job.batched
+        job.fn, leaves, treedef, shared, job.batch, devices, job.batched
     )
     start = time.perf_counter()
-    shared_leaves = [] if job.shared is None else job.shared[0]
+    shared_leaves = [] if shared is None else shared[0]
     out = program.evaluate(prog, leaves, shared_leaves, job.batch, devices, job.names)
     seconds = time.perf_counter() - start
     written = False
