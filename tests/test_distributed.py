@@ -46,7 +46,7 @@ def slow_rotor(member):
 @pytest.fixture(scope="module")
 def client():
     cluster = distributed.LocalCluster(
-        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
         worker_class=distributed.Nanny,
     )
     with cluster, distributed.Client(cluster) as c:
@@ -242,3 +242,51 @@ def test_jax_distributed_two_processes(tmp_path):
                        progress=False, info=info)
     assert info["chunks_loaded"] == 3
     assert_identical(out, reference)
+
+
+_SWEEP_EXPERIMENT = '''"""A tiny ensemble sweep that takes its executor from the command line."""
+import numpy as np
+from jrigid import ensemble
+
+
+def main(out_dir, quick=False, *, n=12, workers=0, scheduler=""):
+    import jax
+    jax.config.update("jax_enable_x64", True)
+    info = {}
+    with ensemble.executor(workers=workers, scheduler=scheduler) as pool:
+        out = ensemble.run(lambda m: {"y": m["x"] ** 2}, {"x": np.arange(n, dtype=float)},
+                           chunk_size=3, out_dir=out_dir / "chunks", executor=pool, info=info,
+                           progress=False)
+    return {"y": out["y"].tolist(), "workers": sorted(info.get("workers", {}))}
+'''
+
+
+def test_cli_takes_workers_and_scheduler(tmp_path, monkeypatch, capsys, client):
+    import json
+
+    from jrigid import cli, registry
+
+    folder = tmp_path / "experiments"
+    folder.mkdir()
+    (folder / "sweep.py").write_text(_SWEEP_EXPERIMENT)
+    (folder / "plain.py").write_text('"""No executor."""\ndef main(out_dir, quick=False):\n'
+                                     '    return {}\n')
+    monkeypatch.setenv(registry.ENV_VAR, str(folder))
+    expected = [float(x) ** 2 for x in range(12)]
+    for option in (["--scheduler", client.scheduler.address], ["--workers", "2"]):
+        out = tmp_path / option[0].strip("-")
+        assert cli.main(["run", "sweep", "--out", str(out), *option]) == 0
+        numbers = json.loads((out / "numbers.json").read_text())
+        assert numbers["y"] == expected
+        assert len(numbers["workers"]) >= 1
+        assert str(os.getpid()) not in {w.split(":")[-1] for w in numbers["workers"]}
+    for argv, message in [
+        (["run", "plain", "--workers", "2"], "does not run on an executor"),
+        (["run", "sweep", "--workers", "0"], "--workers must be at least 1"),
+        (["run", "sweep", "--workers", "2", "--scheduler", "tcp://x:1"], "not both"),
+        (["run", "sweep", "workers=2"], "set with --workers"),
+    ]:
+        with pytest.raises(SystemExit) as exc:
+            cli.main([*argv, "--out", str(tmp_path / "never")])
+        assert exc.value.code == 2
+        assert message in capsys.readouterr().err

@@ -61,7 +61,7 @@ def executor(workers: int = 0, scheduler: str = "") -> Iterator[Executor | None]
         if workers:
             cluster = stack.enter_context(
                 LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                             dashboard_address=None)
+                             dashboard_address=":0")
             )
             client = stack.enter_context(Client(cluster))
         else:
