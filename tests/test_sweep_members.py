@@ -73,7 +73,7 @@ def test_invalid_members_are_named_and_leave_the_others_alone():
                                atol=1e-6)
 
 
-def test_failed_member_does_not_take_its_group_with_it():
+def test_failed_member_does_not_take_its_group_with_it(tmp_path):
     """One fast member exhausts max_steps in a shared-step group: the group is solved
     again per member; the slow members succeed as they do on their own."""
     omegas = np.array([[0.3, 0.1, 0.2], [0.1, 0.3, -0.2], [30.0, 10.0, 20.0], [0.2, -0.1, 0.3]])
@@ -82,8 +82,9 @@ def test_failed_member_does_not_take_its_group_with_it():
     info: dict = {}
     with pytest.warns(ensemble.SweepWarning,
                       match=r"1 of 4 members failed \(first: member 2, result max_steps\)"):
-        shared = ensemble.simulate_many(SCENE, states, TS, info=info, **kwargs)
+        shared = ensemble.simulate_many(SCENE, states, TS, info=info, out_dir=tmp_path, **kwargs)
     assert info["shared_step"] and info["failed"] == 1 and info["first_failed"] == 2
+    assert info["solved_again"] == 4 and (tmp_path / "per_member" / "chunk_00000.npz").exists()
     assert shared["result"].tolist() == [0, 0, Result.max_steps, 0]
     with pytest.warns(ensemble.SweepWarning):
         per_member = ensemble.simulate_many(SCENE, states, TS, shared_step=False, **kwargs)
@@ -112,3 +113,19 @@ def test_vmap_simulate_throw_false_isolates_an_invalid_member():
     assert np.asarray(r_good).tolist() == [0, 0, 0]
     assert np.all(np.isnan(np.asarray(w_bad)[1]))
     np.testing.assert_array_equal(np.asarray(w_bad)[[0, 2]], np.asarray(w_good)[[0, 2]])
+
+
+def test_failed_groups_follow_chunks_groups_and_order():
+    """Groups are consecutive runs of ``group`` members within each chunk, in computing order."""
+    codes = np.zeros(10, dtype=np.int32)
+    codes[7] = Result.max_steps
+    # chunks of 4 in input order: [0-3], [4-7], [8, 9]; groups of 2: member 7 is in {6, 7}
+    assert ensemble.many.failed_groups(codes, None, 4, 2).tolist() == [6, 7]
+    assert ensemble.many.failed_groups(codes, None, 4, 4).tolist() == [4, 5, 6, 7]
+    # an invalid member or an event is not a failure of its group
+    codes[1], codes[9] = Result.invalid_input, Result.event
+    assert ensemble.many.failed_groups(codes, None, 4, 4).tolist() == [4, 5, 6, 7]
+    # computed in the order 9, 8, ..., 0: member 7 sits at position 2, with 9, 8, 6
+    order = np.arange(10)[::-1]
+    assert ensemble.many.failed_groups(codes, order, 4, 4).tolist() == [9, 8, 7, 6]
+    assert ensemble.many.failed_groups(np.zeros(10, np.int32), order, 4, 4).size == 0

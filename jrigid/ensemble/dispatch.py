@@ -95,8 +95,8 @@ def on_executor(plan: Plan, todo: Sequence[int], executor: cf.Executor,
         fn=plan.fn, example=example, shared=shared, batch=plan.batch,
         batched=plan.batched, names=tuple(plan.spec), run=plan.run,
         out_dir=None if out_dir is None else str(out_dir.resolve()),
-        x64=bool(jax.config.jax_enable_x64), compile_cache=compile_cache,
     )
+    x64 = bool(jax.config.jax_enable_x64)
     try:
         payload, key = worker.pack(job)
     except Exception as err:  # noqa: BLE001 - cloudpickle raises many types
@@ -115,7 +115,9 @@ def on_executor(plan: Plan, todo: Sequence[int], executor: cf.Executor,
         finish(done.index, done.outputs)
 
     futures = {
-        executor.submit(worker.run_task, payload, key, i, plan.chunk_leaves(i)): i for i in todo
+        executor.submit(worker.run_task, payload, key, i, plan.chunk_leaves(i), x64,
+                        compile_cache): i
+        for i in todo
     }
     _drain(futures, handle)
     return {"compile_seconds": sum(w["compile_seconds"] for w in workers.values()),

@@ -22,7 +22,6 @@ from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 from jax.typing import ArrayLike
 
@@ -34,7 +33,7 @@ from jrigid.scene import Scene
 from jrigid.state import State
 from jrigid.trajectory import Result, Trajectory
 
-__all__ = ["SWEEP_DEFAULTS", "SweepWarning", "default_summary", "simulate_many"]
+__all__ = ["SWEEP_DEFAULTS", "SweepWarning", "default_summary", "failed_groups", "simulate_many"]
 
 #: Where :func:`simulate_many`'s defaults differ from :func:`jrigid.simulate`'s: the
 #: ``(q, ω)`` formulation, several times faster in a shared step on the benchmark map
@@ -109,7 +108,8 @@ def simulate_many(
             is refused. Pass the same ``summary`` function object (not a new lambda) to
             reuse the compiled program between calls. ``info`` also receives
             ``invalid_input``/``first_invalid`` and ``failed``/``first_failed`` (member
-            counts and the first member's index, or ``None``) and ``shared_step``.
+            counts and the first member's index, or ``None``), ``shared_step`` and
+            ``solved_again`` (members of failed groups solved again per member).
         shared_step: ``None`` (default): ``True`` unless an option only per-member solves
             have is given (``saveat``, ``event``, ``dense``, a ``stepsize_controller``,
             ``project="manifold"``), for ``solver="exact"``, or when the formulation stops
@@ -120,10 +120,12 @@ def simulate_many(
             on its group — the members of its chunk, so on ``chunk_size``, ``order`` and
             the device count, which a resumed run keeps (it is then identical) — and,
             if a member of the group fails (non-finite values, ``max_steps``), the whole
-            group is solved again member by member (each member's own ``simulate``),
-            so the others are unaffected by it. ``False``: every member has its own
-            adaptive step (``jax.vmap(simulate)``), and its results depend on its own
-            inputs only (not on the chunk, padding, devices or worker; bit for bit).
+            group is solved again member by member (each member's own ``simulate``; a
+            second program, compiled only then; with ``out_dir`` stored in
+            ``out_dir/per_member``), so the others are unaffected by it. ``False``: every
+            member has its own adaptive step (``jax.vmap(simulate)``), and its results
+            depend on its own inputs only (not on the chunk, padding, devices or worker;
+            bit for bit).
         **simulate_kwargs: passed to :func:`jrigid.simulate` (``solver``, ``rtol``,
             ``formulation``, ...), with :data:`SWEEP_DEFAULTS` (``formulation=
             "quaternion_omega"``) where not given. ``throw`` defaults to ``False`` here:
@@ -192,7 +194,30 @@ def simulate_many(
         executor=executor,
         compile_cache=compile_cache,
     )
-    stats.update(_tally(out["result"]), shared_step=member.lockstep)
+    regrouped = np.zeros(0, dtype=int)
+    if member.lockstep:
+        regrouped = failed_groups(out["result"], None if order is None else np.asarray(order),
+                                  stats["chunk_size"], stats["group"])
+    if regrouped.size:
+        # Solve the failed groups again, member by member (stored in out_dir/per_member).
+        again = run(
+            member._replace(lockstep=False),
+            jax.tree_util.tree_map(lambda a: np.asarray(a)[regrouped], inputs),
+            shared=shared,
+            chunk_size=chunk_size,
+            out_dir=None if out_dir is None else os.path.join(out_dir, "per_member"),
+            metadata=dict(meta, solved_again="per member: the members of failed groups"),
+            resume=resume,
+            progress=progress,
+            devices=devices,
+            check_finite=False,
+            executor=executor,
+            compile_cache=compile_cache,
+        )
+        for k in out:
+            out[k][regrouped] = again[k]
+    stats.update(_tally(out["result"]), shared_step=member.lockstep,
+                 solved_again=int(regrouped.size))
     if info is not None:
         info.update(stats)
     if stats["invalid_input"] or stats["failed"]:
@@ -217,9 +242,7 @@ def _use_lockstep(shared_step: bool | None, kwargs: dict[str, Any]) -> bool:
 def _tally(codes: np.ndarray) -> dict[str, Any]:
     """Counts and first indices of invalid and failed members from their result codes."""
     invalid = np.flatnonzero(codes == Result.invalid_input)
-    failed = np.flatnonzero(
-        (codes != Result.success) & (codes != Result.event) & (codes != Result.invalid_input)
-    )
+    failed = np.flatnonzero(_failed(codes))
     return {
         "invalid_input": int(invalid.size),
         "first_invalid": int(invalid[0]) if invalid.size else None,
@@ -251,10 +274,31 @@ def _describe(value) -> str:
     return re.sub(r" at 0x[0-9a-fA-F]+", "", repr(value))
 
 
-def _group_failed(result: jax.Array) -> jax.Array:
-    """Whether a member of a shared-step group failed (not counting invalid inputs)."""
-    failed = (result != Result.success) & (result != Result.event)
-    return jnp.any(failed & (result != Result.invalid_input))
+def _failed(codes: np.ndarray) -> np.ndarray:
+    """Which result codes are failures of the solve (not invalid inputs, not events)."""
+    return (codes != Result.success) & (codes != Result.event) & (codes != Result.invalid_input)
+
+
+def failed_groups(codes: np.ndarray, order: np.ndarray | None, chunk_size: int,
+                  group: int) -> np.ndarray:
+    """Members (input indices, in computing order) of the shared-step groups that failed.
+
+    Args:
+        codes: ``(N,)`` result codes in input order.
+        order: the computing order (``None``: input order).
+        chunk_size: members per chunk; ``group``: members per group (a chunk is split
+            into groups of ``group`` consecutive members).
+
+    Returns:
+        the input indices of every member of every group in which a member's solve
+        failed, in computing order.
+    """
+    n = codes.shape[0]
+    perm = np.arange(n) if order is None else np.asarray(order)
+    position = np.arange(n)
+    group_id = (position // chunk_size) * (chunk_size + 1) + (position % chunk_size) // group
+    bad = np.unique(group_id[_failed(codes[perm])])
+    return perm[np.isin(group_id, bad)]
 
 
 class _Member(NamedTuple):
@@ -288,11 +332,4 @@ class _Member(NamedTuple):
             scene, member["state"], ts, batched_scene=self.scene_fn is not None, **shared,
             **kwargs,
         )
-        scene_axis = None if self.scene_fn is None else 0
-
-        def per_member(_):
-            one = lambda sc, st: self.keep(simulate(sc, st, ts, **shared, **kwargs))  # noqa: E731
-            return jax.vmap(one, in_axes=(scene_axis, 0))(scene, member["state"])
-
-        return jax.lax.cond(_group_failed(traj.result), per_member,
-                            lambda _: jax.vmap(self.keep)(traj), None)
+        return jax.vmap(self.keep)(traj)

@@ -5,8 +5,8 @@ that is not on disk yet. The task carries a :class:`Job` (the member function an
 every chunk shares, serialised once by the driver with ``cloudpickle``, so closures and
 lambdas travel too), the chunk's index and its input arrays. The worker
 
-1. sets JAX's configuration as the driver's (``jax_enable_x64``) and, before its first
-   compilation, JAX's persistent compilation cache (``jax_compilation_cache_dir``): a
+1. sets JAX's configuration as the driver's (``jax_enable_x64``) and JAX's persistent
+   compilation cache (``jax_compilation_cache_dir``), before it unpickles anything: a
    worker that finds the chunk program in the cache loads it instead of compiling;
 2. compiles the chunk program once (kept for its later tasks; :mod:`jrigid.ensemble.program`)
    and evaluates the chunk on its first local device;
@@ -52,8 +52,6 @@ class Job:
         names: the output names.
         run: the run identity (written into each chunk file).
         out_dir: the run's folder (a path every worker can write) or ``None``.
-        x64: the driver's ``jax_enable_x64``.
-        compile_cache: folder of JAX's persistent compilation cache, or ``None``.
     """
 
     fn: Callable[..., dict[str, Any]]
@@ -64,8 +62,6 @@ class Job:
     names: tuple[str, ...]
     run: str
     out_dir: str | None
-    x64: bool
-    compile_cache: str | None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -118,26 +114,37 @@ def _job(payload: bytes, key: str) -> tuple[Job, Any, Any]:
 
 
 def configure(x64: bool, compile_cache: str | None) -> None:
-    """Set this process's ``jax_enable_x64`` and (if not set yet) the compilation cache."""
+    """Set this process's ``jax_enable_x64`` and JAX's persistent compilation cache folder.
+
+    JAX decides whether to use the cache at its first compilation: a folder set later is
+    taken up by resetting the cache (``compilation_cache.reset_cache``).
+    """
     if bool(jax.config.jax_enable_x64) != bool(x64):
         jax.config.update("jax_enable_x64", bool(x64))
-    if compile_cache and not jax.config.jax_compilation_cache_dir:
+    if compile_cache and jax.config.jax_compilation_cache_dir != str(compile_cache):
+        from jax.experimental.compilation_cache import compilation_cache
+
         jax.config.update("jax_compilation_cache_dir", str(compile_cache))
+        compilation_cache.reset_cache()
 
 
-def run_task(payload: bytes, key: str, index: int, leaves: Sequence[np.ndarray]) -> ChunkDone:
+def run_task(payload: bytes, key: str, index: int, leaves: Sequence[np.ndarray], x64: bool,
+             compile_cache: str | None) -> ChunkDone:
     """Compute chunk ``index`` of the job in ``payload`` on this process's first device.
 
     Args:
         payload, key: from :func:`pack`.
         index: the chunk's index.
         leaves: the chunk's input arrays (leading axis: its member count).
+        x64: the driver's ``jax_enable_x64`` (set before anything is unpickled, so that
+            arrays come back in their dtypes).
+        compile_cache: folder of JAX's persistent compilation cache, or ``None``.
 
     Returns:
         :class:`ChunkDone`.
     """
+    configure(x64, compile_cache)
     job, treedef, shared = _job(payload, key)
-    configure(job.x64, job.compile_cache)
     devices = jax.local_devices()[:1]
     prog, compile_seconds = program.compiled(
         job.fn, leaves, treedef, shared, job.batch, devices, job.batched
