@@ -171,7 +171,8 @@ def run(
             compiled program. Fingerprinted in ``meta.json`` like ``inputs``.
         check_finite: reject NaN/inf in float inputs (``ValueError``).
         info: optional dict, filled with run statistics: ``compile_seconds`` (with an
-            executor: summed over the workers), ``run_seconds``, ``chunks_computed``,
+            executor: the longest of the workers', who compile at the same time),
+            ``run_seconds`` (wall time less ``compile_seconds``), ``chunks_computed``,
             ``chunks_loaded``, ``n_devices``, ``batch`` (members per compiled call),
             ``chunk_size``, ``n_chunks``, ``group`` (members per call of a batched
             ``fn``; 1 otherwise), ``threads`` (in process: chunks run at once) or
