@@ -7,6 +7,8 @@ Examples::
     jrigid run hello --quick             # results in results/hello/
     jrigid run hello n=5 --out /tmp/h    # parameters as key=value (or --param key=value)
     jrigid run all --quick               # every experiment, results/<name>/ each
+    jrigid run stability_map --workers 2 # its sweep on a local Dask cluster of 2 processes
+    jrigid run stability_map --scheduler tcp://head:8786   # ... on a running cluster
     jrigid demo                          # the wobbling plate and the T-handle
     jrigid docs serve                    # the documentation site at http://127.0.0.1:8000
     jrigid docs build --quick --out site # build it (tutorials at small sizes)
@@ -71,6 +73,21 @@ def build_parser() -> argparse.ArgumentParser:
         "-p", "--param", action="append", default=[], metavar="KEY=VALUE", help="same as KEY=VALUE"
     )
     p_run.add_argument("--quick", action="store_true", help="short run with fewer steps and frames")
+    p_run.add_argument(
+        "--workers",
+        metavar="N",
+        type=int,
+        default=None,
+        help="run the experiment's ensemble on a local Dask cluster of N worker processes "
+        "(experiments with a `workers` parameter; needs jrigid[distributed])",
+    )
+    p_run.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        default=None,
+        help="run the experiment's ensemble on the Dask scheduler at ADDRESS "
+        "(e.g. tcp://head:8786, a dask-jobqueue cluster)",
+    )
     p_run.add_argument(
         "--out",
         metavar="DIR",
@@ -169,13 +186,38 @@ def _fail(parser: argparse.ArgumentParser, message: str):
     parser.exit(2, f"{parser.prog}: error: {' '.join(message.split())}\n")
 
 
+_EXECUTOR_OPTIONS = ("workers", "scheduler")
+
+
+def _executor_params(p_run: argparse.ArgumentParser, args: argparse.Namespace) -> dict[str, str]:
+    """``--workers``/``--scheduler`` as the experiment parameters of the same names."""
+    out = {}
+    workers, scheduler = getattr(args, "workers", None), getattr(args, "scheduler", None)
+    if workers is not None:
+        if workers < 1:
+            _fail(p_run, f"--workers must be at least 1, got {workers}")
+        out["workers"] = str(workers)
+    if scheduler is not None:
+        if not scheduler.strip():
+            _fail(p_run, "--scheduler needs an address, e.g. tcp://head:8786")
+        out["scheduler"] = scheduler
+    if len(out) == 2:
+        _fail(p_run, "give --workers (a new local cluster) or --scheduler (a running one), "
+              "not both")
+    return out
+
+
 def _cmd_run(p_run: argparse.ArgumentParser, args: argparse.Namespace, name: str) -> int:
     try:
         raw = registry.split_pairs([*args.params, *args.param])
     except registry.ParameterError as e:
         _fail(p_run, str(e))
+    clash = [k for k in _EXECUTOR_OPTIONS if k in raw]
+    if clash:
+        _fail(p_run, f"{clash[0]} is set with --{clash[0]}, not as KEY=VALUE")
+    executor = _executor_params(p_run, args)
     if name == "all":
-        if raw:
+        if raw or executor:
             _fail(p_run, "parameters cannot be given with `run all`; run experiments one by one")
         problem = _unwritable(args.out if args.out is not None else Path("results"))
         if problem:
@@ -194,6 +236,11 @@ def _cmd_run(p_run: argparse.ArgumentParser, args: argparse.Namespace, name: str
         return 0
     try:
         exp = registry.get(name)
+        if executor and not set(executor) <= set(registry.parameters(exp.main)[0]):
+            _fail(p_run, f"experiment {name!r} does not run on an executor: --workers and "
+                  "--scheduler are for experiments with workers/scheduler parameters "
+                  "(e.g. stability_map)")
+        raw = {**raw, **executor}
         registry.parse_params(name, exp.main, raw)  # check before creating folders
     except (registry.ExperimentError, registry.ParameterError) as e:
         _fail(p_run, str(e))
