@@ -85,7 +85,7 @@ def test_help_for_each_command(argv, capsys):
 
 def test_no_command_prints_help(capsys):
     assert cli.main([]) == 0
-    assert "{list,run,demo}" in capsys.readouterr().out
+    assert "{list,run,demo,docs}" in capsys.readouterr().out
 
 
 # --------------------------------------------------------------------------- errors
