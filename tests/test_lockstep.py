@@ -181,7 +181,8 @@ def test_simulate_many_shared_step(tmp_path, batch):
     assert info["chunks_loaded"] == 3 and info["chunks_computed"] == 0
     np.testing.assert_array_equal(again["omega"], out["omega"])
     with pytest.raises(ValueError, match="different run"):
-        ensemble.simulate_many(SCENE, states, TS, out_dir=tmp_path / "r", **kwargs)
+        ensemble.simulate_many(SCENE, states, TS, out_dir=tmp_path / "r", shared_step=False,
+                               **kwargs)
 
 
 def test_run_batched_checks_output_axis():
@@ -213,7 +214,8 @@ def test_sharded_lockstep_groups_are_device_shares(tmp_path, batch):
     with np.load(tmp_path / "sharded.npz") as data:
         sharded = {k: data[k] for k in data.files}
     for k in range(8):
-        group = simulate_lockstep(SCENE, take(states, slice(3 * k, 3 * k + 3)), TS)
+        group = simulate_lockstep(SCENE, take(states, slice(3 * k, 3 * k + 3)), TS,
+                                  formulation=ensemble.SWEEP_DEFAULTS["formulation"])
         # the same group and steps; the sharded program rounds alike to about an ulp
         np.testing.assert_allclose(sharded["q"][3 * k:3 * k + 3], group.q, rtol=0, atol=1e-13)
         np.testing.assert_array_equal(sharded["num_steps"][3 * k:3 * k + 3],
