@@ -51,6 +51,20 @@ def _cap_stats(values, mask) -> dict:
     )
 
 
+def _sweep(member, omega0, order, chunk_size, out_dir, info, executor, metadata) -> dict:
+    """The map's ensemble run (in this process, or on ``executor``)."""
+    return ensemble.run(
+        member,
+        {"omega0": np.asarray(omega0)},
+        order=order,
+        chunk_size=chunk_size,
+        out_dir=out_dir,
+        metadata=metadata,
+        info=info,
+        executor=executor,
+    )
+
+
 def main(
     out_dir,
     quick: bool = False,
@@ -64,6 +78,8 @@ def main(
     rtol: float = 1e-8,
     chunk_size: int = 1024,
     sort: bool = True,
+    workers: int = 0,
+    scheduler: str = "",
 ) -> dict:
     """Map principal-axis stability over the sphere of spin directions.
 
@@ -80,6 +96,11 @@ def main(
         rtol: relative tolerance (``atol = rtol/100``).
         chunk_size: members per ensemble chunk.
         sort: order members by the difficulty proxy ``|L|²`` before chunking.
+        workers: compute the chunks on a local Dask cluster of this many worker
+            processes (``jrigid run stability_map --workers N``); 0: in this process.
+        scheduler: compute them on the Dask scheduler at this address instead
+            (``--scheduler tcp://head:8786``; a dask-jobqueue cluster's, for Slurm).
+            Results are the same bit for bit either way.
 
     Returns:
         the numbers written to ``numbers.json``.
@@ -109,23 +130,11 @@ def main(
     proxy = jnp.sum((moments[None, :] * omega0) ** 2, axis=-1)  # |L|², see benchmarks/lockstep.py
     order = np.asarray(stability.difficulty_order(proxy)) if sort else np.arange(n_directions)
     info: dict = {}
-    out = ensemble.run(
-        member,
-        {"omega0": np.asarray(omega0)},
-        order=order,
-        chunk_size=chunk_size,
-        out_dir=Path(out_dir) / "chunks",
-        metadata=dict(
-            sides=list(sides),
-            mode=mode,
-            periods=periods,
-            rtol=rtol,
-            samples_per_period=samples_per_period,
-            ftle_periods=ftle_periods,
-            sort=sort,
-        ),
-        info=info,
-    )
+    with ensemble.executor(workers=workers, scheduler=scheduler) as pool:
+        out = _sweep(member, omega0, order, chunk_size, Path(out_dir) / "chunks", info, pool,
+                     dict(sides=list(sides), mode=mode, periods=periods, rtol=rtol,
+                          samples_per_period=samples_per_period, ftle_periods=ftle_periods,
+                          sort=sort))
 
     d = np.asarray(dirs)
     unstable = out["flips"] > 0

@@ -9,7 +9,8 @@ Layers (imports point down the stack):
 - integration: :func:`simulate` (diffrax, in :mod:`jrigid.integrate`),
   :func:`simulate_bounces` with a :class:`Floor` (impulsive contact, :mod:`jrigid.contact`),
   :mod:`jrigid.leapfrog` (the chapter's stepper), :mod:`jrigid.exact` (closed-form
-  torque-free motion) on :mod:`jrigid.special` (elliptic functions)
+  torque-free motion) on :mod:`jrigid.special` (elliptic functions),
+  :class:`Splitting` (exact-flow splitting under a torque, :mod:`jrigid.splitting`)
 - applications: :mod:`jrigid.fit`, :mod:`jrigid.ensemble`
 - presentation: :mod:`jrigid.viz` (matplotlib), the ``jrigid`` command line
 
@@ -43,6 +44,7 @@ _EXPORTS = {
     "SimulationError": "jrigid.trajectory",
     "PrecisionWarning": "jrigid.solve",
     "simulate": "jrigid.integrate",
+    "Splitting": "jrigid.splitting",
     "Floor": "jrigid.contact",
     "simulate_bounces": "jrigid.contact",
 }
@@ -60,6 +62,7 @@ _SUBMODULES = (
     "quaternion",
     "scene",
     "special",
+    "splitting",
     "state",
     "trajectory",
     "viz",
@@ -98,6 +101,7 @@ if TYPE_CHECKING:
         quaternion,
         scene,
         special,
+        splitting,
         state,
         trajectory,
         viz,
@@ -113,5 +117,6 @@ if TYPE_CHECKING:
     from jrigid.integrate import Result, SimulationError, simulate  # noqa: F401
     from jrigid.scene import FreeFlight, FreeRotation, Gravity, Pivot, Scene, Torque  # noqa: F401
     from jrigid.solve import PrecisionWarning  # noqa: F401
+    from jrigid.splitting import Splitting  # noqa: F401
     from jrigid.state import Kinematics, State  # noqa: F401
     from jrigid.trajectory import Trajectory  # noqa: F401

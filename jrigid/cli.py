@@ -1,4 +1,4 @@
-"""The ``jrigid`` command line: ``jrigid list``, ``jrigid run``, ``jrigid demo``.
+"""The ``jrigid`` command line: ``jrigid list``, ``jrigid run``, ``jrigid demo``, ``jrigid docs``.
 
 Examples::
 
@@ -7,7 +7,11 @@ Examples::
     jrigid run hello --quick             # results in results/hello/
     jrigid run hello n=5 --out /tmp/h    # parameters as key=value (or --param key=value)
     jrigid run all --quick               # every experiment, results/<name>/ each
+    jrigid run stability_map --workers 2 # its sweep on a local Dask cluster of 2 processes
+    jrigid run stability_map --scheduler tcp://head:8786   # ... on a running cluster
     jrigid demo                          # the wobbling plate and the T-handle
+    jrigid docs serve                    # the documentation site at http://127.0.0.1:8000
+    jrigid docs build --quick --out site # build it (tutorials at small sizes)
 
 Each run writes figures, ``numbers.json`` and ``report.md`` into its results folder and
 prints the report's path. Runs use float64 (``jax_enable_x64``), jrigid's recommended
@@ -22,6 +26,8 @@ usage.
 from __future__ import annotations
 
 import argparse
+import os
+import subprocess
 import sys
 import tempfile
 import traceback
@@ -39,14 +45,14 @@ _PARAM_HELP = (
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The argument parser with its ``list``, ``run`` and ``demo`` subcommands."""
+    """The argument parser with its ``list``, ``run``, ``demo`` and ``docs`` subcommands."""
     parser = argparse.ArgumentParser(
         prog="jrigid",
         description="jrigid: differentiable rigid-body rotation in JAX. "
         "Run experiments and the demo; results go to results/<name>/.",
     )
     parser.add_argument("--version", action="version", version=f"jrigid {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="{list,run,demo}")
+    sub = parser.add_subparsers(dest="command", metavar="{list,run,demo,docs}")
 
     p_list = sub.add_parser(
         "list", help="list every experiment, one line each", description="List every experiment."
@@ -67,6 +73,21 @@ def build_parser() -> argparse.ArgumentParser:
         "-p", "--param", action="append", default=[], metavar="KEY=VALUE", help="same as KEY=VALUE"
     )
     p_run.add_argument("--quick", action="store_true", help="short run with fewer steps and frames")
+    p_run.add_argument(
+        "--workers",
+        metavar="N",
+        type=int,
+        default=None,
+        help="run the experiment's ensemble on a local Dask cluster of N worker processes "
+        "(experiments with a `workers` parameter; needs jrigid[distributed])",
+    )
+    p_run.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        default=None,
+        help="run the experiment's ensemble on the Dask scheduler at ADDRESS "
+        "(e.g. tcp://head:8786, a dask-jobqueue cluster)",
+    )
     p_run.add_argument(
         "--out",
         metavar="DIR",
@@ -91,7 +112,19 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="results folder (default results/demo)",
     )
-    for p in (p_list, p_run, p_demo):
+    p_docs = sub.add_parser(
+        "docs",
+        help="build or serve the documentation site (needs the docs extra)",
+        description="Build (mkdocs build --strict) or serve (mkdocs serve) the documentation "
+        "site of a source checkout; its tutorials are executed. Needs "
+        '`pip install -e ".[docs]"`.',
+    )
+    p_docs.add_argument("action", choices=("build", "serve"), help="build the site, or serve it")
+    p_docs.add_argument("--quick", action="store_true", help="run the tutorials at small sizes")
+    p_docs.add_argument(
+        "--out", metavar="DIR", type=Path, default=None, help="site folder (default: site/)"
+    )
+    for p in (p_list, p_run, p_demo, p_docs):
         p.set_defaults(subparser=p)  # so that errors print the subcommand's usage
     return parser
 
@@ -153,13 +186,38 @@ def _fail(parser: argparse.ArgumentParser, message: str):
     parser.exit(2, f"{parser.prog}: error: {' '.join(message.split())}\n")
 
 
+_EXECUTOR_OPTIONS = ("workers", "scheduler")
+
+
+def _executor_params(p_run: argparse.ArgumentParser, args: argparse.Namespace) -> dict[str, str]:
+    """``--workers``/``--scheduler`` as the experiment parameters of the same names."""
+    out = {}
+    workers, scheduler = getattr(args, "workers", None), getattr(args, "scheduler", None)
+    if workers is not None:
+        if workers < 1:
+            _fail(p_run, f"--workers must be at least 1, got {workers}")
+        out["workers"] = str(workers)
+    if scheduler is not None:
+        if not scheduler.strip():
+            _fail(p_run, "--scheduler needs an address, e.g. tcp://head:8786")
+        out["scheduler"] = scheduler
+    if len(out) == 2:
+        _fail(p_run, "give --workers (a new local cluster) or --scheduler (a running one), "
+              "not both")
+    return out
+
+
 def _cmd_run(p_run: argparse.ArgumentParser, args: argparse.Namespace, name: str) -> int:
     try:
         raw = registry.split_pairs([*args.params, *args.param])
     except registry.ParameterError as e:
         _fail(p_run, str(e))
+    clash = [k for k in _EXECUTOR_OPTIONS if k in raw]
+    if clash:
+        _fail(p_run, f"{clash[0]} is set with --{clash[0]}, not as KEY=VALUE")
+    executor = _executor_params(p_run, args)
     if name == "all":
-        if raw:
+        if raw or executor:
             _fail(p_run, "parameters cannot be given with `run all`; run experiments one by one")
         problem = _unwritable(args.out if args.out is not None else Path("results"))
         if problem:
@@ -178,6 +236,11 @@ def _cmd_run(p_run: argparse.ArgumentParser, args: argparse.Namespace, name: str
         return 0
     try:
         exp = registry.get(name)
+        if executor and not set(executor) <= set(registry.parameters(exp.main)[0]):
+            _fail(p_run, f"experiment {name!r} does not run on an executor: --workers and "
+                  "--scheduler are for experiments with workers/scheduler parameters "
+                  "(e.g. stability_map)")
+        raw = {**raw, **executor}
         registry.parse_params(name, exp.main, raw)  # check before creating folders
     except (registry.ExperimentError, registry.ParameterError) as e:
         _fail(p_run, str(e))
@@ -186,6 +249,40 @@ def _cmd_run(p_run: argparse.ArgumentParser, args: argparse.Namespace, name: str
         _fail(p_run, problem)
     _run_one(name, args.out, args.quick, raw)
     return 0
+
+
+def docs_command(action: str, quick: bool, out: Path | None) -> tuple[list[str], dict, Path]:
+    """The ``mkdocs`` command line, environment and folder of ``jrigid docs ACTION``.
+
+    Raises:
+        FileNotFoundError: no ``mkdocs.yml`` next to the ``jrigid`` package (an installed
+            copy rather than a source checkout).
+    """
+    root = Path(__file__).resolve().parent.parent
+    config = root / "mkdocs.yml"
+    if not config.is_file():
+        raise FileNotFoundError(
+            f"no mkdocs.yml in {root}: the site is built from a source checkout of jrigid"
+        )
+    argv = [sys.executable, "-m", "mkdocs", action, "-f", str(config)]
+    if action == "build":
+        argv.append("--strict")
+        if out is not None:
+            argv += ["-d", str(out.resolve())]
+    env = {**os.environ, "JRIGID_DOCS_QUICK": "1" if quick else "0"}
+    return argv, env, root
+
+
+def _cmd_docs(p_docs: argparse.ArgumentParser, args: argparse.Namespace) -> int:
+    try:
+        argv, env, root = docs_command(args.action, args.quick, args.out)
+    except FileNotFoundError as e:
+        p_docs.error(str(e))
+    try:
+        import mkdocs  # noqa: F401
+    except ImportError:
+        p_docs.error('mkdocs is not installed: pip install -e ".[docs]"')
+    return subprocess.call(argv, env=env, cwd=root)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -216,6 +313,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _cmd_list(args.verbose)
     if args.command == "run":
         return _cmd_run(args.subparser, args, args.name)
+    if args.command == "docs":
+        return _cmd_docs(args.subparser, args)
     # demo: `jrigid demo ...` is `jrigid run demo ...`
     args.param = []
     return _cmd_run(args.subparser, args, "demo")

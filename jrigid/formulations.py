@@ -19,8 +19,8 @@ Every formulation turns the user's :class:`~jrigid.state.State` into its own var
 ``q̈ = ½ q ⊗ (0, ω̇) − |q̇|² q``, which is what is integrated. The constraint manifold
 ``|q|² = 1, q·q̇ = 0`` is invariant: with ``e = |q|² − 1`` and ``c = q·q̇`` the exact
 flow gives ``ė = 2c``, ``ċ = −|q̇|² e``, a neutral oscillation, so numerical errors
-accumulate. Two remedies: projection after each step (:meth:`project`, used by
-:func:`jrigid.simulate` through :class:`jrigid.integrate.ProjectedSolver`) and the
+accumulate. Two remedies: projection after each step (:meth:`AbstractFormulation.project`,
+used by :func:`jrigid.simulate` through :class:`jrigid.integrate.ProjectedSolver`) and the
 stabilising term ``−(2k c + ½ k² e) q / |q|²`` added to ``q̈`` (``stabilization = γ``,
 ``k = γ |ω|``), which turns the residual dynamics into
 ``ë + 2k ė + (k² + 2|q̇|²) e = 0``: a decay at rate ``k`` without stiffness. The term

@@ -339,15 +339,42 @@ def rotate_tensor(inertia, q) -> jax.Array:
     return rotate_tensor_by_matrix(inertia, quat.to_matrix(q))
 
 
+@jax.custom_jvp
+def _eigh(sym):
+    """``(w, V)`` of ``jnp.linalg.eigh``, with a derivative that is finite at repeated ``w``."""
+    w, v = jnp.linalg.eigh(sym)
+    return w, v
+
+
+@_eigh.defjvp
+def _eigh_jvp(primals, tangents):
+    # A V = V Λ gives dΛ = diag(P) and dV = V (F ∘ P), P = Vᵀ dA V, F_ij = 1/(λ_j − λ_i).
+    # For λ_i = λ_j (to within rounding: 64 eps of the largest) the pair's rotation within
+    # the eigenspace is arbitrary; it is taken as zero (jnp.linalg.eigh's own rule divides
+    # by the rounding-level gap there and returns NaN or noise).
+    (sym,), (dsym,) = primals, tangents
+    w, v = _eigh(sym)
+    proj = jnp.swapaxes(v, -1, -2) @ dsym @ v
+    gap = w[..., None, :] - w[..., :, None]
+    tol = 64 * jnp.finfo(w.dtype).eps * jnp.max(jnp.abs(w), axis=-1)[..., None, None]
+    apart = jnp.abs(gap) > tol
+    f = jnp.where(apart, 1.0 / jnp.where(apart, gap, 1.0), 0.0)
+    dw = jnp.diagonal(proj, axis1=-2, axis2=-1)
+    return (w, v), (dw, v @ (f * proj))
+
+
 def principal_axes(inertia) -> tuple[jax.Array, jax.Array]:
     """Principal moments and a right-handed principal frame of a symmetric tensor.
 
     ``I = R diag(moments) Rᵀ`` with ``R = quaternion.to_matrix(q)``: the columns of ``R``
     are the principal axes in the frame of ``I``, and ``q`` is the body → frame rotation.
 
-    For repeated moments any orthonormal basis of the eigenspace is equally valid and
-    one is returned; the moments and their gradients stay well defined there, the frame's
-    gradient is defined only where the moments are distinct.
+    For repeated moments (equal to within 64 machine epsilons of the largest) any
+    orthonormal basis of the eigenspace is equally valid and one is returned; the moments
+    and their gradients stay well defined there, and the frame's gradient is finite: it
+    leaves out the (arbitrary) rotation within the eigenspace, so that any function of
+    ``R diag(moments) Rᵀ`` gets its derivative except for perturbations that mix two axes
+    of equal moment.
 
     Args:
         inertia: ``(..., 3, 3)`` symmetric (the symmetric part is used).
@@ -358,7 +385,7 @@ def principal_axes(inertia) -> tuple[jax.Array, jax.Array]:
     inertia = as_float(inertia)
     _check_tensor(inertia)
     sym = 0.5 * (inertia + jnp.swapaxes(inertia, -1, -2))
-    moments, V = jnp.linalg.eigh(sym)
+    moments, V = _eigh(sym)
     sign = jnp.sign(jnp.linalg.det(V))
     sign = jnp.where(sign == 0, 1.0, sign).astype(V.dtype)
     V = jnp.concatenate([V[..., :2], V[..., 2:] * sign[..., None, None]], axis=-1)

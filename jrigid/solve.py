@@ -83,7 +83,8 @@ class ProjectedSolver(diffrax.AbstractWrappedSolver):
 
     Attributes:
         solver: the wrapped diffrax solver (any; ``isinstance`` checks see through it).
-        formulation: the formulation whose :meth:`project` is applied.
+        formulation: the formulation whose
+            :meth:`~jrigid.formulations.AbstractFormulation.project` is applied.
         invariants: the values to restore (:class:`~jrigid.invariants.Invariants`), or
             ``None`` for the constraint manifold only.
     """
@@ -580,10 +581,9 @@ def raise_on_failure(traj: Trajectory, throw: bool, ts, rtol, atol, max_steps: i
     """
     if not throw:
         return traj
-    failure = [(k, *CAUSES[k]) for k in Result if k.failed]
     if is_traced(traj.result):
         texts = [""] * len(Result)
-        for k, cause_text, remedy in failure:
+        for k, cause_text, remedy in ((k, *CAUSES[k]) for k in Result if k.failed):
             texts[k] = (
                 f"jrigid.simulate failed: {cause_text.format(max_steps=max_steps)}; "
                 f"{remedy}. (Under vmap, pass throw=False for per-member result codes.)"

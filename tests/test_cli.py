@@ -85,7 +85,7 @@ def test_help_for_each_command(argv, capsys):
 
 def test_no_command_prints_help(capsys):
     assert cli.main([]) == 0
-    assert "{list,run,demo}" in capsys.readouterr().out
+    assert "{list,run,demo,docs}" in capsys.readouterr().out
 
 
 # --------------------------------------------------------------------------- errors
@@ -475,3 +475,16 @@ def test_t_handle_moments_match_a_point_cloud():
     tensor = m * (np.sum(p * p) * np.eye(3) - p.T @ p)
     assert np.allclose(moments, np.diag(tensor), rtol=2e-2)
     assert np.abs(tensor - np.diag(np.diag(tensor))).max() < 1e-3 * np.abs(tensor).max()
+
+
+def test_docs_command_builds_the_checkout_site(tmp_path):
+    argv, env, root = cli.docs_command("build", True, tmp_path / "site")
+    assert (root / "mkdocs.yml").is_file() and (root / "jrigid" / "cli.py").is_file()
+    assert argv[1:5] == ["-m", "mkdocs", "build", "-f"] and argv[5] == str(root / "mkdocs.yml")
+    assert "--strict" in argv and argv[-2:] == ["-d", str((tmp_path / "site").resolve())]
+    assert env["JRIGID_DOCS_QUICK"] == "1"
+    argv, env, _ = cli.docs_command("serve", False, None)
+    assert argv[3] == "serve" and "--strict" not in argv and env["JRIGID_DOCS_QUICK"] == "0"
+    with pytest.raises(SystemExit) as info:
+        cli.main(["docs", "publish"])
+    assert info.value.code == 2

@@ -112,9 +112,11 @@ def _screen_members(formulation, scene, states, ts, rtol, atol, scene_axis):
 
     invalid, cause, scenes, states = jax.vmap(one, in_axes=(scene_axis, 0))(scene, states)
     if scene_axis is None:
-        # Every member's stand-in scene equals the scene unless the body itself is bad,
-        # in which case all members are invalid and any stand-in will do.
-        scenes = jax.tree_util.tree_map(lambda a: a[0], scenes)
+        # A valid member's scene is the scene itself (an invalid member's may be the
+        # stand-in body); if the body itself is bad, every member is invalid and any
+        # stand-in will do.
+        first_valid = jnp.argmin(invalid)
+        scenes = jax.tree_util.tree_map(lambda a: a[first_valid], scenes)
     return invalid, cause, scenes, states, tuple(messages)
 
 

@@ -1,13 +1,23 @@
 """The common case of an ensemble: :func:`simulate_many`, :func:`jrigid.simulate` for every member.
 
-Per member (``jax.vmap(simulate)``, the default) or, with ``shared_step=True``, one
-lockstep solve per device's share of a chunk (:func:`~jrigid.ensemble.simulate_lockstep`).
+By default (``shared_step=None``) each chunk of members is integrated as one system with
+a shared step (:func:`~jrigid.ensemble.simulate_lockstep`) in the
+``quaternion_omega`` formulation, the fastest way through a sweep on a CPU
+(``benchmarks/ensemble_throughput.py``); a group in which a member fails (non-finite
+values, the step budget) is solved again member by member, so that member does not take
+its group mates with it. ``shared_step=False`` gives every member its own step control
+(``jax.vmap(simulate)``). Invalid members (a zero quaternion, a non-physical body, NaN
+values) get :attr:`~jrigid.trajectory.Result.invalid_input` and NaN outputs and leave
+the others as they would be without them; the run names how many there are, and the
+first (a :class:`SweepWarning` and ``info``).
 """
 
 from __future__ import annotations
 
+import concurrent.futures as cf
 import os
 import re
+import warnings
 from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple
 
@@ -17,12 +27,27 @@ from jax.typing import ArrayLike
 
 from jrigid.ensemble.lockstep import simulate_lockstep
 from jrigid.ensemble.runner import run
+from jrigid.formulations import get_formulation
 from jrigid.integrate import simulate
 from jrigid.scene import Scene
 from jrigid.state import State
-from jrigid.trajectory import Trajectory
+from jrigid.trajectory import Result, Trajectory
 
-__all__ = ["default_summary", "simulate_many"]
+__all__ = ["SWEEP_DEFAULTS", "SweepWarning", "default_summary", "failed_groups", "simulate_many"]
+
+#: Where :func:`simulate_many`'s defaults differ from :func:`jrigid.simulate`'s: the
+#: ``(q, ω)`` formulation, several times faster in a shared step on the benchmark map
+#: at equal or better error (the projection onto the invariants is the same).
+SWEEP_DEFAULTS: dict[str, Any] = {"formulation": "quaternion_omega"}
+
+# simulate's options a shared-step solve (simulate_lockstep) takes as well.
+_LOCKSTEP_OPTIONS = {"formulation", "solver", "rtol", "atol", "max_steps", "dt0", "adjoint",
+                     "project", "throw"}
+
+
+class SweepWarning(UserWarning):
+    """Some members of a :func:`simulate_many` sweep were invalid or failed (the text says
+    how many, and names the first)."""
 
 
 def default_summary(traj: Trajectory) -> dict[str, jax.Array]:
@@ -52,7 +77,9 @@ def simulate_many(
     devices: Sequence[jax.Device] | None = None,
     info: dict[str, Any] | None = None,
     order: Any = None,
-    shared_step: bool = False,
+    shared_step: bool | None = None,
+    executor: cf.Executor | None = None,
+    compile_cache: str | os.PathLike | bool | None = None,
     **simulate_kwargs,
 ) -> dict[str, np.ndarray]:
     """Simulate ``N`` initial states (and/or parameters) with :func:`ensemble.run <run>`.
@@ -69,27 +96,42 @@ def simulate_many(
         summary: ``summary(trajectory) -> dict[str, array]``, what to keep per member;
             default :func:`default_summary` (``q``, ``omega`` at ``ts``, ``result``,
             ``num_steps``). Reduce here (e.g. final state only) to save memory and disk.
-        chunk_size, out_dir, metadata, resume, progress, devices, info, order: as in
-            :func:`run`. ``ts``, the scene (when fixed), ``rtol``, ``atol`` and ``dt0``
-            are passed as ``run``'s traced ``shared`` values (other values do not
-            recompile; they are fingerprinted in ``meta.json``); the other
-            ``simulate_kwargs``, ``shared_step`` and the summary's name are stored in the
-            metadata, so resuming with other settings is refused. Pass the same
-            ``summary`` function object (not a new lambda) to reuse the compiled program
-            between calls.
-        shared_step: ``False`` (default): every member has its own adaptive step
-            (``jax.vmap(simulate)``), and its results do not depend on the chunk.
-            ``True``: each device's share of a chunk (``chunk_size / n_devices``
-            members) is integrated as one system with a shared step
+            ``result`` is always kept (added when the summary lacks it).
+        chunk_size, out_dir, metadata, resume, progress, devices, info, order, executor,
+            compile_cache: as in :func:`run` (``executor``: a Dask
+            ``Client.get_executor()``, a ``ProcessPoolExecutor``, ...: the same call on
+            one machine, a workstation pool or a cluster). ``ts``, the scene (when
+            fixed), ``rtol``, ``atol`` and ``dt0`` are passed as ``run``'s traced
+            ``shared`` values (other values do not recompile; they are fingerprinted in
+            ``meta.json``); the other ``simulate_kwargs``, ``shared_step`` and the
+            summary's name are stored in the metadata, so resuming with other settings
+            is refused. Pass the same ``summary`` function object (not a new lambda) to
+            reuse the compiled program between calls. ``info`` also receives
+            ``invalid_input``/``first_invalid`` and ``failed``/``first_failed`` (member
+            counts and the first member's index, or ``None``), ``shared_step`` and
+            ``solved_again`` (members of failed groups solved again per member).
+        shared_step: ``None`` (default): ``True`` unless an option only per-member solves
+            have is given (``saveat``, ``event``, ``dense``, a ``stepsize_controller``,
+            ``project="manifold"``), for ``solver="exact"``, or when the formulation stops
+            at an event (``euler_angles``). ``True``: each device's share of a chunk (with an
+            executor, each chunk) is integrated as one system with a shared step
             (:func:`~jrigid.ensemble.simulate_lockstep`): several times the throughput
-            on a CPU (``benchmarks/ensemble_throughput.py``), every member within its
-            tolerance, but a member's results depend on the other members of its group
-            (a resumed run must keep the chunk size and device count, so it is still
-            identical), and a failure stops its whole group (the members' ``result``
-            codes say so). Not for ``euler_angles``.
+            on a CPU, every member within its tolerance. A member's results then depend
+            on its group — the members of its chunk, so on ``chunk_size``, ``order`` and
+            the device count, which a resumed run keeps (it is then identical) — and,
+            if a member of the group fails (non-finite values, ``max_steps``), the whole
+            group is solved again member by member (each member's own ``simulate``; a
+            second program, compiled only then; with ``out_dir`` stored in
+            ``out_dir/per_member``), so the others are unaffected by it. ``False``: every
+            member has its own adaptive step (``jax.vmap(simulate)``), and its results
+            depend on its own inputs only (not on the chunk, padding, devices or worker;
+            bit for bit).
         **simulate_kwargs: passed to :func:`jrigid.simulate` (``solver``, ``rtol``,
-            ``formulation``, ...). ``throw`` defaults to ``False`` here: a failed member
-            gets a nonzero ``result`` code and NaN outputs instead of stopping the run.
+            ``formulation``, ...), with :data:`SWEEP_DEFAULTS` (``formulation=
+            "quaternion_omega"``) where not given. ``throw`` defaults to ``False`` here:
+            a failed or invalid member gets a nonzero ``result`` code and NaN outputs
+            instead of stopping the run, and a :class:`SweepWarning` names how many and
+            the first.
 
     Returns:
         ``dict[str, np.ndarray]`` of the summary outputs, leading axis ``N``.
@@ -111,7 +153,8 @@ def simulate_many(
     ts = np.asarray(ts, dtype=jax.dtypes.canonicalize_dtype(np.float64))
     if ts.ndim != 1 or ts.shape[0] < 2 or not np.all(np.isfinite(ts)):
         raise ValueError(f"ts must be a finite 1-D array of at least 2 times, got {ts!r}")
-    kwargs = {"throw": False, **simulate_kwargs}
+    kwargs = {"throw": False, **SWEEP_DEFAULTS, **simulate_kwargs}
+    lockstep = _use_lockstep(shared_step, kwargs)
     # Arrays common to all members are traced (changing them does not recompile).
     shared = {"ts": ts}
     for name in _TRACED:
@@ -124,7 +167,7 @@ def simulate_many(
         None if fixed else scene,
         default_summary if summary is None else summary,
         tuple(sorted(kwargs.items())),
-        bool(shared_step),
+        lockstep,
     )
     inputs = {"state": states} if params is None else {"state": states, "params": params}
     meta = dict(metadata or {})
@@ -133,7 +176,8 @@ def simulate_many(
         "summary": getattr(member.summary, "__qualname__", _describe(member.summary)),
         "shared_step": member.lockstep,
     }
-    return run(
+    stats: dict[str, Any] = {}
+    out = run(
         member,
         inputs,
         shared=shared,
@@ -143,18 +187,118 @@ def simulate_many(
         resume=resume,
         progress=progress,
         devices=devices,
-        info=info,
+        info=stats,
         order=order,
         batched=member.lockstep,
+        check_finite=False,  # a NaN member is an invalid member, not a failed sweep
+        executor=executor,
+        compile_cache=compile_cache,
     )
+    regrouped = np.zeros(0, dtype=int)
+    if member.lockstep:
+        regrouped = failed_groups(out["result"], None if order is None else np.asarray(order),
+                                  stats["chunk_size"], stats["group"])
+    if regrouped.size:
+        # Solve the failed groups again, member by member (stored in out_dir/per_member).
+        again = run(
+            member._replace(lockstep=False),
+            jax.tree_util.tree_map(lambda a: np.asarray(a)[regrouped], inputs),
+            shared=shared,
+            chunk_size=chunk_size,
+            out_dir=None if out_dir is None else os.path.join(out_dir, "per_member"),
+            metadata=dict(meta, solved_again="per member: the members of failed groups"),
+            resume=resume,
+            progress=progress,
+            devices=devices,
+            check_finite=False,
+            executor=executor,
+            compile_cache=compile_cache,
+        )
+        for k in out:
+            out[k][regrouped] = again[k]
+    stats.update(_tally(out["result"]), shared_step=member.lockstep,
+                 solved_again=int(regrouped.size))
+    if info is not None:
+        info.update(stats)
+    if stats["invalid_input"] or stats["failed"]:
+        warnings.warn(SweepWarning(_sweep_message(stats, out["result"])), stacklevel=2)
+    return out
 
 
 _TRACED = ("rtol", "atol", "dt0")
 
 
+def _use_lockstep(shared_step: bool | None, kwargs: dict[str, Any]) -> bool:
+    """Whether the members are solved in shared-step groups (see ``shared_step``)."""
+    if shared_step is not None:
+        return bool(shared_step)
+    if set(kwargs) - _LOCKSTEP_OPTIONS or kwargs.get("project", True) not in (True, False):
+        return False
+    if isinstance(kwargs.get("solver"), str):  # "exact": closed form, no steps to share
+        return False
+    return get_formulation(kwargs["formulation"]).event() is None
+
+
+def _tally(codes: np.ndarray) -> dict[str, Any]:
+    """Counts and first indices of invalid and failed members from their result codes."""
+    invalid = np.flatnonzero(codes == Result.invalid_input)
+    failed = np.flatnonzero(_failed(codes))
+    return {
+        "invalid_input": int(invalid.size),
+        "first_invalid": int(invalid[0]) if invalid.size else None,
+        "failed": int(failed.size),
+        "first_failed": int(failed[0]) if failed.size else None,
+    }
+
+
+def _sweep_message(stats: dict[str, Any], codes: np.ndarray) -> str:
+    n = codes.shape[0]
+    parts = []
+    if stats["invalid_input"]:
+        parts.append(
+            f"{stats['invalid_input']} of {n} members have invalid input (first: member "
+            f"{stats['first_invalid']}); their outputs are NaN and their result is "
+            "invalid_input (jrigid.simulate on that member's inputs names the problem)"
+        )
+    if stats["failed"]:
+        first = stats["first_failed"]
+        parts.append(
+            f"{stats['failed']} of {n} members failed (first: member {first}, result "
+            f"{Result(int(codes[first])).name}); their outputs after the failure are NaN"
+        )
+    return "simulate_many: " + "; ".join(parts) + "."
+
+
 def _describe(value) -> str:
     """``repr`` without memory addresses (stable across sessions, for ``meta.json``)."""
     return re.sub(r" at 0x[0-9a-fA-F]+", "", repr(value))
+
+
+def _failed(codes: np.ndarray) -> np.ndarray:
+    """Which result codes are failures of the solve (not invalid inputs, not events)."""
+    return (codes != Result.success) & (codes != Result.event) & (codes != Result.invalid_input)
+
+
+def failed_groups(codes: np.ndarray, order: np.ndarray | None, chunk_size: int,
+                  group: int) -> np.ndarray:
+    """Members (input indices, in computing order) of the shared-step groups that failed.
+
+    Args:
+        codes: ``(N,)`` result codes in input order.
+        order: the computing order (``None``: input order).
+        chunk_size: members per chunk; ``group``: members per group (a chunk is split
+            into groups of ``group`` consecutive members).
+
+    Returns:
+        the input indices of every member of every group in which a member's solve
+        failed, in computing order.
+    """
+    n = codes.shape[0]
+    perm = np.arange(n) if order is None else np.asarray(order)
+    position = np.arange(n)
+    group_id = (position // chunk_size) * (chunk_size + 1) + (position % chunk_size) // group
+    bad = np.unique(group_id[_failed(codes[perm])])
+    return perm[np.isin(group_id, bad)]
 
 
 class _Member(NamedTuple):
@@ -165,6 +309,12 @@ class _Member(NamedTuple):
     summary: Callable[[Trajectory], dict[str, jax.Array]]
     kwargs: tuple
     lockstep: bool = False
+
+    def keep(self, traj: Trajectory) -> dict[str, jax.Array]:
+        """The summary of one member's trajectory, with its ``result`` code."""
+        out = dict(self.summary(traj))
+        out.setdefault("result", traj.result)
+        return out
 
     def __call__(self, member, shared):
         shared = dict(shared)
@@ -177,9 +327,9 @@ class _Member(NamedTuple):
         else:
             scene = self.scene_fn(member["params"])
         if not self.lockstep:
-            return self.summary(simulate(scene, member["state"], ts, **shared, **kwargs))
+            return self.keep(simulate(scene, member["state"], ts, **shared, **kwargs))
         traj = simulate_lockstep(
             scene, member["state"], ts, batched_scene=self.scene_fn is not None, **shared,
             **kwargs,
         )
-        return jax.vmap(self.summary)(traj)
+        return jax.vmap(self.keep)(traj)

@@ -2,22 +2,25 @@
 
 ``run(fn, inputs)`` evaluates ``fn`` on every member of ``inputs`` (a pytree of arrays
 with a common leading axis ``N``) with ``jax.jit(jax.vmap(fn))``, compiled once for a
-fixed chunk shape:
+fixed chunk shape, in three steps:
 
-- members are processed ``chunk_size`` at a time (bounding memory); the last chunk is
-  padded by repeating its last member and the padding is dropped from the results, so
-  no chunk triggers a new compilation;
-- each chunk is split over a 1-D mesh of ``devices`` (:mod:`jrigid.ensemble.sharding`);
-- with ``out_dir``, each finished chunk is written atomically to
-  ``out_dir/chunk_00000.npz``, ... next to ``meta.json``
-  (:mod:`jrigid.ensemble.storage`); running again with the same ``out_dir`` loads the
-  finished chunks and computes only the rest.
+1. **plan** (:mod:`jrigid.ensemble.plan`): check the inputs, fix the chunks (``chunk_size``
+   members each; the last one padded by repeating its last member, the padding dropped
+   from the results, so no chunk triggers a new compilation), find ``fn``'s outputs by
+   abstract evaluation and write down the ``meta.json`` record;
+2. **resume** (:func:`resume_from`): with ``out_dir``, take the folder's lock, check a stored
+   run against the plan and load its finished chunks (each tagged with its index and
+   the run's identity, :mod:`jrigid.ensemble.storage`);
+3. **dispatch** (:mod:`jrigid.ensemble.dispatch`): compute the missing chunks — in this
+   process (split over a 1-D mesh of ``devices``, :mod:`jrigid.ensemble.sharding`) or
+   one task per chunk on an ``executor`` — writing each atomically to
+   ``out_dir/chunk_00000.npz``, ... as it finishes, under one progress bar.
 
 Members are computed independently: a member's outputs do not depend on the chunk,
-the padding or the number of devices it was computed with (bit for bit; tested). The
-exception is ``batched=True``, for functions that couple the members of a group on
-purpose (:func:`~jrigid.ensemble.simulate_lockstep`): there each device's share of a
-chunk is one group.
+the padding, the number of devices or the worker it was computed with (bit for bit;
+tested). The exception is ``batched=True``, for functions that couple the members of a
+group on purpose (:func:`~jrigid.ensemble.simulate_lockstep`): there each device's share
+of a chunk is one group.
 
 Errors: bad inputs, a ``fn`` that does not return a dict of arrays and an ``out_dir``
 holding a different run raise ``ValueError`` before anything is computed. An error
@@ -27,8 +30,8 @@ chunks finished before it stay on disk.
 
 from __future__ import annotations
 
-import json
-import math
+import concurrent.futures as cf
+import contextlib
 import os
 import pathlib
 import sys
@@ -39,159 +42,20 @@ from typing import Any
 import jax
 import numpy as np
 
-from jrigid.ensemble import sharding, storage
+from jrigid.ensemble import dispatch, sharding, storage
+from jrigid.ensemble.plan import Plan, plan
 
-__all__ = ["run"]
-
-# Compiled chunk programs, reused by later calls with the same fn and shapes.
-_COMPILED: dict[Any, Any] = {}
-_COMPILED_MAX = 16
+__all__ = ["default_compile_cache", "resume_from", "run"]
 
 
-def _named_leaves(inputs, what: str = "inputs") -> tuple[list[tuple[str, np.ndarray]], Any]:
-    """``[(key path, host array), ...]`` and the treedef; numpy, canonical dtypes."""
-    path_leaves, treedef = jax.tree_util.tree_flatten_with_path(inputs)
-    if not path_leaves and what == "inputs":
-        raise ValueError("inputs has no arrays: pass a pytree (e.g. a dict) of arrays")
-    out = []
-    for path, leaf in path_leaves:
-        name = jax.tree_util.keystr(path)
-        try:
-            a = np.asarray(leaf)
-        except Exception as err:  # noqa: BLE001
-            raise ValueError(f"{what}{name} is not an array ({type(leaf).__name__})") from err
-        if a.dtype == object or a.dtype.kind not in "biufc":
-            raise ValueError(f"{what}{name} must be a numeric or bool array, got dtype {a.dtype}")
-        a = np.asarray(a, dtype=jax.dtypes.canonicalize_dtype(a.dtype))
-        out.append((name, a))
-    return out, treedef
+def default_compile_cache() -> pathlib.Path:
+    """``$XDG_CACHE_HOME/jrigid/jax`` (``~/.cache/jrigid/jax``): the workers' default cache."""
+    base = os.environ.get("XDG_CACHE_HOME") or pathlib.Path.home() / ".cache"
+    return pathlib.Path(base) / "jrigid" / "jax"
 
 
-def _check_finite(named: list[tuple[str, np.ndarray]], what: str) -> None:
-    for name, a in named:
-        if a.dtype.kind in "fc":
-            bad = ~np.isfinite(a)
-            if bad.any():
-                first = int(np.argwhere(bad)[0][0]) if a.ndim else 0
-                where = f", first at member {first}" if what == "inputs" else ""
-                raise ValueError(
-                    f"{what}{name} has non-finite values (NaN or inf){where}; fix the "
-                    f"{what} or pass check_finite=False"
-                )
-
-
-def _check_inputs(named: list[tuple[str, np.ndarray]], check_finite: bool) -> int:
-    """The common member count ``N``; ``ValueError`` naming the first bad leaf."""
-    for name, a in named:
-        if a.ndim == 0:
-            raise ValueError(
-                f"inputs{name} is a scalar: every input needs a leading member axis "
-                "(pass values common to all members as shared=...)"
-            )
-    sizes = {name: a.shape[0] for name, a in named}
-    if len(set(sizes.values())) != 1:
-        listing = ", ".join(f"inputs{k}: {v}" for k, v in sizes.items())
-        raise ValueError(f"inputs must share the leading (member) axis; got sizes {listing}")
-    n = next(iter(sizes.values()))
-    if n == 0:
-        raise ValueError("inputs have no members (leading axis of size 0)")
-    if check_finite:
-        _check_finite(named, "inputs")
-    return n
-
-
-def _output_spec(fn, example, batch: int | None = None) -> dict[str, tuple[tuple[int, ...], str]]:
-    """``{name: (per-member shape, dtype)}`` of ``fn``'s outputs, by abstract evaluation.
-
-    ``batch``: ``fn`` is batched and ``example`` has that many members; each output must
-    have the leading axis ``batch``, which is stripped from the returned shapes.
-    """
-    out = jax.eval_shape(lambda *args: fn(*args), *example)
-    if not isinstance(out, dict) or not out:
-        raise ValueError(
-            f"fn must return a non-empty dict of arrays (name -> array), got {type(out).__name__}"
-        )
-    spec = {}
-    for name, value in out.items():
-        if not isinstance(name, str) or not name.isidentifier():
-            raise ValueError(f"fn's output names must be identifiers (str), got {name!r}")
-        if not isinstance(value, jax.ShapeDtypeStruct):
-            raise ValueError(
-                f"fn's output {name!r} must be one array, got {type(value).__name__} "
-                "(flatten nested outputs into separate names)"
-            )
-        shape = tuple(value.shape)
-        if batch is not None:
-            if shape[:1] != (batch,):
-                raise ValueError(
-                    f"batched fn's output {name!r} has shape {shape}: it must have the "
-                    f"group's leading member axis ({batch})"
-                )
-            shape = shape[1:]
-        spec[name] = (shape, np.dtype(value.dtype).str)
-    return spec
-
-
-def _compiled(fn, leaves, treedef, shared, batch: int, shard, devices, batched: bool):
-    """``jax.jit(jax.vmap(fn))`` lowered and compiled once for a chunk of ``batch`` members.
-
-    ``batched``: ``fn`` takes a whole group of members itself: each device calls it on
-    its own slice of the chunk (``jax.shard_map``, no communication between devices).
-
-    ``shared`` is ``None`` or ``(leaves, treedef)`` of the values common to all members,
-    passed (replicated) as traced arguments: ``fn(member, shared)``.
-    """
-    avals = tuple((a.shape[1:], a.dtype.str) for a in leaves)
-    s_leaves, s_treedef = shared if shared is not None else ([], None)
-    s_avals = tuple((a.shape, a.dtype.str) for a in s_leaves)
-    key = (fn, batched, treedef, avals, s_treedef, s_avals, batch, tuple(d.id for d in devices))
-    try:
-        hit = _COMPILED.get(key)
-    except TypeError:  # unhashable fn
-        key, hit = None, None
-    if hit is not None:
-        return hit, 0.0
-
-    def chunk_fn(s_values, *xs):
-        if shared is None:
-            one = lambda *m: fn(jax.tree_util.tree_unflatten(treedef, m))  # noqa: E731
-        else:
-            common = jax.tree_util.tree_unflatten(s_treedef, s_values)
-            one = lambda *m: fn(jax.tree_util.tree_unflatten(treedef, m), common)  # noqa: E731
-        return one(*xs) if batched else jax.vmap(one)(*xs)
-
-    replicated = sharding.replicated(shard)
-    program = chunk_fn
-    if batched:
-        program = jax.shard_map(
-            chunk_fn,
-            mesh=shard.mesh,
-            in_specs=(replicated.spec, *[shard.spec] * len(leaves)),
-            out_specs=shard.spec,
-            check_vma=False,  # diffrax's loops mix replicated and per-device carries
-        )
-
-    structs = [
-        jax.ShapeDtypeStruct((batch, *a.shape[1:]), a.dtype, sharding=shard) for a in leaves
-    ]
-    s_structs = [jax.ShapeDtypeStruct(a.shape, a.dtype, sharding=replicated) for a in s_leaves]
-    start = time.perf_counter()
-    compiled = jax.jit(program).lower(s_structs, *structs).compile()
-    seconds = time.perf_counter() - start
-    if key is not None:
-        if len(_COMPILED) >= _COMPILED_MAX:
-            _COMPILED.pop(next(iter(_COMPILED)))
-        _COMPILED[key] = compiled
-    return compiled, seconds
-
-
-def _prepare_dir(
-    out_dir: pathlib.Path, meta: dict[str, Any], resume: bool, writer: bool
-) -> dict[str, Any] | None:
-    """Check a stored run against ``meta`` (resume) or clear it; write ``meta.json``.
-
-    Returns the stored ``meta.json`` of a resumed run (``None`` for a new one).
-    """
+def _check_dir(out_dir: pathlib.Path, meta: dict[str, Any], resume: bool) -> dict[str, Any] | None:
+    """The stored ``meta.json`` matching ``meta`` (``None``: none, or not resuming)."""
     if out_dir.exists() and not out_dir.is_dir():
         raise ValueError(f"out_dir {out_dir} exists and is not a folder")
     stored = storage.read_meta(out_dir) if resume and out_dir.is_dir() else None
@@ -208,15 +72,46 @@ def _prepare_dir(
                 f"{', '.join(diff)}). Choose another out_dir, or pass resume=False to "
                 "discard the stored chunks and start over."
             )
-    if not writer:
-        return stored
-    out_dir.mkdir(parents=True, exist_ok=True)
-    storage.remove_stale_temporaries(out_dir)
-    if not resume:
-        storage.remove_run(out_dir)
-    if stored is None:
-        storage.write_meta(out_dir, meta)
     return stored
+
+
+def resume_from(p: Plan, out_dir: pathlib.Path | None, resume: bool, writer: bool,
+           spans: bool) -> list[dict[str, np.ndarray] | None]:
+    """Prepare ``out_dir`` for the run ``p`` and load the chunks it already holds.
+
+    Checks a stored run against ``p.meta`` (``ValueError`` if it differs), or deletes it
+    (``resume=False``); the ``writer`` process writes ``meta.json`` for a new run. With
+    a mesh ``spans``-ing processes, process 0 decides which chunks are finished and tells
+    the others. Returns one entry per chunk: its outputs, or ``None`` to compute.
+    """
+    results: list[dict[str, np.ndarray] | None] = [None] * p.n_chunks
+    if out_dir is None:
+        return results
+    stored = _check_dir(out_dir, p.meta, resume)
+    if stored is not None:
+        p.meta["created"] = stored.get("created", p.meta["created"])
+    if writer:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        storage.remove_stale_temporaries(out_dir)
+        if not resume:
+            storage.remove_run(out_dir)
+        if stored is None:
+            storage.write_meta(out_dir, p.meta)
+    if resume:
+        for i in range(p.n_chunks):
+            results[i] = storage.load_chunk(out_dir, i, p.spec, p.members(i)[1], p.run)
+    if spans:
+        from jax.experimental import multihost_utils
+
+        done = np.array([r is not None for r in results])
+        done = np.asarray(multihost_utils.broadcast_one_to_all(done))
+        if any(d and r is None for r, d in zip(results, done, strict=True)):
+            raise ValueError(
+                f"process {jax.process_index()} cannot read the chunks process 0 found in "
+                f"{out_dir}: with several processes out_dir must be on a shared file system"
+            )
+        results = [r if d else None for r, d in zip(results, done, strict=True)]
+    return results
 
 
 def run(
@@ -234,6 +129,8 @@ def run(
     info: dict[str, Any] | None = None,
     order: Any = None,
     batched: bool = False,
+    executor: cf.Executor | None = None,
+    compile_cache: str | os.PathLike | bool | None = None,
 ) -> dict[str, np.ndarray]:
     """Evaluate ``fn`` on every member of ``inputs``: chunked, sharded, saved, resumable.
 
@@ -267,15 +164,20 @@ def run(
         devices: devices to shard each chunk over (1-D mesh ``("members",)``);
             ``None``: ``jax.devices()`` (with ``jax.distributed`` initialised, every
             process's devices: see the module :mod:`jrigid.ensemble` for that case).
+            Not with ``executor`` (each worker uses its first device).
         shared: optional pytree of arrays common to all members (output times, a
             scene, tolerances), passed to ``fn`` as its second argument, replicated on
             every device and traced: other values of the same shapes reuse the
             compiled program. Fingerprinted in ``meta.json`` like ``inputs``.
         check_finite: reject NaN/inf in float inputs (``ValueError``).
-        info: optional dict, filled with run statistics: ``compile_seconds``,
-            ``run_seconds``, ``chunks_computed``, ``chunks_loaded``, ``n_devices``,
-            ``batch`` (members per compiled call), ``chunk_size``, ``n_chunks``,
-            ``group`` (members per call of a batched ``fn``; 1 otherwise).
+        info: optional dict, filled with run statistics: ``compile_seconds`` (with an
+            executor: the longest of the workers', who compile at the same time),
+            ``run_seconds`` (wall time less ``compile_seconds``), ``chunks_computed``,
+            ``chunks_loaded``, ``n_devices``, ``batch`` (members per compiled call),
+            ``chunk_size``, ``n_chunks``, ``group`` (members per call of a batched
+            ``fn``; 1 otherwise), ``threads`` (in process: chunks run at once) or
+            ``workers`` (with an executor: ``{"host:pid": {"chunks", "compile_seconds",
+            "seconds"}}``).
         order: optional ``(N,)`` permutation: members are computed (and chunked, and
             stored) in the order ``inputs[order]``, and the results are put back in input
             order. Under ``vmap`` an adaptive solve runs until the slowest member of its
@@ -291,6 +193,26 @@ def run(
             its group, hence on ``chunk_size`` and the number of devices (both part of
             what a resumed run must match), and on the padding of the last chunk (which
             repeats its last member).
+        executor: ``None`` (default): compute in this process, each chunk split over
+            ``devices``, several chunks at once on a CPU with fewer devices than cores.
+            Or any :class:`concurrent.futures.Executor`: one task per chunk
+            (:mod:`jrigid.ensemble.worker`), e.g. a ``ProcessPoolExecutor`` (with the
+            ``"spawn"`` start method: JAX does not survive ``fork``), a Dask
+            ``distributed.Client(...).get_executor()`` or a ``dask_jobqueue`` cluster's
+            client. Each worker computes its chunk on its first device, so a member's
+            results are bit for bit those of the in-process run (for ``batched`` ``fn``:
+            of an in-process run on one device); ``out_dir`` must then be a folder every
+            worker can write (a shared file system). ``fn`` and ``shared`` are sent with
+            ``cloudpickle`` (closures work). A worker lost mid-chunk costs that chunk
+            only: a scheduler that retries tasks (Dask does) computes it again
+            elsewhere; a ``ProcessPoolExecutor`` stops (``BrokenProcessPool``) and a rerun
+            resumes. Chunks written before any error stay on disk.
+        compile_cache: with ``executor``: folder of JAX's persistent compilation cache
+            for the workers (set on each worker before its first compilation), so a
+            worker that finds the chunk program there loads it instead of compiling.
+            ``None``: the driver's ``jax_compilation_cache_dir`` if set, else
+            ``~/.cache/jrigid/jax`` (``$XDG_CACHE_HOME`` if set); ``False``: none. The
+            cache is trusted code: keep it where only you can write.
 
     Returns:
         ``dict[str, np.ndarray]``: each output of ``fn`` stacked over members, leading
@@ -299,160 +221,84 @@ def run(
     Raises:
         ValueError: inputs without a common leading axis, non-finite float inputs, a
             bad ``chunk_size``/``metadata``/``devices``, ``fn`` not returning a dict of
-            arrays, or an ``out_dir`` holding a different (or unreadable) run.
+            arrays, an ``out_dir`` holding a different (or unreadable) run or in use by
+            another run (``out_dir/.lock``), ``devices`` with ``executor``, or an ``fn``
+            that cannot be sent to the executor's workers.
     """
-    if isinstance(chunk_size, bool) or not isinstance(chunk_size, int) or chunk_size < 1:
-        raise ValueError(f"chunk_size must be a positive int, got {chunk_size!r}")
-    if not callable(fn):
-        raise ValueError(f"fn must be callable, got {type(fn).__name__}")
-    named, treedef = _named_leaves(inputs)
-    n = _check_inputs(named, check_finite)
-    inverse = None
-    if order is not None:
-        order = _permutation(order, n)
-        named = [(k, a[order]) for k, a in named]
-        inverse = np.argsort(order)
-    s_named, s_treedef = _named_leaves(shared, "shared")
-    if check_finite:
-        _check_finite(s_named, "shared")
-    s_leaves = [a for _, a in s_named]
-    s_pair = None if shared is None else (s_leaves, s_treedef)
-    try:
-        meta_user = json.loads(json.dumps({} if metadata is None else metadata))
-    except (TypeError, ValueError) as err:
-        raise ValueError(f"metadata must be JSON-serialisable: {err}") from None
-    if not isinstance(meta_user, dict):
-        raise ValueError(f"metadata must be a dict, got {type(metadata).__name__}")
-    devs = sharding.resolve_devices(devices)
-    leaves = [a for _, a in named]
-    size = min(chunk_size, n)
-    n_chunks = math.ceil(n / size)
-    batch = sharding.padded_size(size, len(devs))
-    group = batch // len(devs)
-    lead = (group,) if batched else ()
-    example = jax.tree_util.tree_unflatten(
-        treedef, [jax.ShapeDtypeStruct(lead + a.shape[1:], a.dtype) for a in leaves]
-    )
-    args = (example,)
-    if shared is not None:
-        args += (jax.tree_util.tree_unflatten(
-            s_treedef, [jax.ShapeDtypeStruct(a.shape, a.dtype) for a in s_leaves]
-        ),)
-    spec = _output_spec(fn, args, group if batched else None)
-    meta = {
-        "format": "jrigid.ensemble/1",
-        "n_members": n,
-        "chunk_size": size,
-        "n_chunks": n_chunks,
-        "inputs": {
-            "sha256": storage.fingerprint(named),
-            "leaves": {k: {"shape": list(a.shape), "dtype": a.dtype.str} for k, a in named},
-        },
-        "shared": None if shared is None else {
-            "sha256": storage.fingerprint([("treedef", storage.structure(s_treedef)), *s_named]),
-            "leaves": {k: {"shape": list(a.shape), "dtype": a.dtype.str} for k, a in s_named},
-        },
-        "outputs": {k: {"shape": list(s), "dtype": d} for k, (s, d) in spec.items()},
-        "metadata": meta_user,
-        "fn": getattr(fn, "__qualname__", type(fn).__name__),
-        "batched": {"group": group} if batched else False,
-        "versions": storage.versions(),
-        "created": storage.now(),
-    }
+    if executor is not None:
+        if not isinstance(executor, cf.Executor):
+            raise ValueError(
+                f"executor must be a concurrent.futures.Executor (e.g. a Dask "
+                f"Client.get_executor()), got {type(executor).__name__}"
+            )
+        if devices is not None:
+            raise ValueError("devices is for the in-process run: with an executor each "
+                             "worker computes its chunks on its own first device")
+        devs, spans = [], False
+    else:
+        devs = sharding.resolve_devices(devices)
+        spans = sharding.spans_processes(devs)
+    p = plan(fn, inputs, chunk_size=chunk_size, n_devices=max(1, len(devs)), shared=shared,
+             check_finite=check_finite, metadata=metadata, order=order, batched=batched)
     # A mesh over several processes computes each chunk together: process 0 writes.
-    spans = sharding.spans_processes(devs)
     writer = not spans or jax.process_index() == 0
     path = None if out_dir is None else pathlib.Path(out_dir)
-    if path is not None:
-        stored = _prepare_dir(path, meta, resume, writer)
-        if stored is not None:
-            meta["created"] = stored.get("created", meta["created"])
+    locked = contextlib.nullcontext()
+    if path is not None and writer:
+        if path.exists() and not path.is_dir():
+            raise ValueError(f"out_dir {path} exists and is not a folder")
+        path.mkdir(parents=True, exist_ok=True)
+        locked = storage.lock(path)
+    with locked:
+        start = time.perf_counter()
+        results = resume_from(p, path, resume, writer, spans)
+        todo = [i for i, r in enumerate(results) if r is None]
+        stats = _dispatch(p, todo, results, path if writer else None, progress, writer,
+                          executor, devs, spans, compile_cache)
+        if path is not None and writer and todo:
+            storage.write_meta(path, dict(p.meta, completed=storage.now()))
+    if info is not None:
+        info.update(
+            run_seconds=time.perf_counter() - start - stats["compile_seconds"],
+            chunks_computed=len(todo),
+            chunks_loaded=p.n_chunks - len(todo),
+            n_devices=p.n_devices,
+            batch=p.batch,
+            chunk_size=p.size,
+            n_chunks=p.n_chunks,
+            group=p.group,
+            **stats,
+        )
+    return p.assemble(results)
 
-    start = time.perf_counter()
-    results: list[dict[str, np.ndarray] | None] = [None] * n_chunks
-    if path is not None and resume:
-        for i in range(n_chunks):
-            results[i] = storage.load_chunk(path, i, spec, min(size, n - i * size))
-    done = np.array([r is not None for r in results])
-    if spans:
-        from jax.experimental import multihost_utils
 
-        done = np.asarray(multihost_utils.broadcast_one_to_all(done))
-        results = [r if d else None for r, d in zip(results, done, strict=True)]
-        if any(d and r is None for r, d in zip(results, done, strict=True)):
-            raise ValueError(
-                f"process {jax.process_index()} cannot read the chunks process 0 found in "
-                f"{path}: with several processes out_dir must be on a shared file system"
-            )
-    loaded = int(done.sum())
-    todo = [i for i in range(n_chunks) if not done[i]]
-
-    shard = sharding.member_sharding(devs)
-    compile_seconds = 0.0
-    show = (sys.stderr.isatty() or n_chunks > 1) if progress is None else bool(progress)
+def _dispatch(p: Plan, todo, results, path, progress, writer, executor, devs, spans,
+              compile_cache) -> dict[str, Any]:
+    """Compute chunks ``todo`` into ``results`` (and ``path``) under one progress bar."""
+    show = (sys.stderr.isatty() or p.n_chunks > 1) if progress is None else bool(progress)
     bar = None
     if show and writer:
         from tqdm.auto import tqdm
 
-        bar = tqdm(total=n, desc="ensemble", unit="member", leave=False)
-        bar.update(sum(min(size, n - i * size) for i in range(n_chunks) if done[i]))
+        bar = tqdm(total=p.n, desc="ensemble", unit="member", leave=False)
+        bar.update(p.n - sum(p.members(i)[1] for i in todo))
+
+    def finish(i: int, chunk: dict[str, np.ndarray]) -> None:
+        if path is not None and executor is None:
+            storage.write_chunk(path, i, chunk, p.run)
+        results[i] = chunk
+        if bar is not None:
+            bar.update(p.members(i)[1])
+
     try:
-        if todo:
-            program, compile_seconds = _compiled(
-                fn, leaves, treedef, s_pair, batch, shard, devs, bool(batched)
-            )
-            s_placed = sharding.place(s_leaves, sharding.replicated(shard))
-
-        def finish(i, real, device_out):
-            out = sharding.fetch(device_out)
-            chunk = {k: np.ascontiguousarray(out[k][:real]) for k in spec}
-            if path is not None and writer:
-                storage.write_chunk(path, i, chunk)
-            results[i] = chunk
-            if bar is not None:
-                bar.update(real)
-
-        # Dispatch chunk i (asynchronously) before fetching and writing chunk i - 1.
-        pending = None
-        for i in todo:
-            lo = i * size
-            real = min(size, n - lo)
-            index = lo + np.minimum(np.arange(batch), real - 1)
-            placed = sharding.place([np.take(a, index, axis=0) for a in leaves], shard)
-            current = (i, real, program(s_placed, *placed))
-            if pending is not None:
-                finish(*pending)
-            pending = current
-        if pending is not None:
-            finish(*pending)
+        if executor is not None:
+            cache = compile_cache
+            if cache is None:
+                cache = jax.config.jax_compilation_cache_dir or default_compile_cache()
+            cache = str(cache) if cache else None
+            return dispatch.on_executor(p, todo, executor, path, finish, cache)
+        threads = 1 if spans else max(2, dispatch.usable_cores() // len(devs))
+        return dispatch.in_process(p, todo, devs, finish, threads)
     finally:
         if bar is not None:
             bar.close()
-    if path is not None and writer and todo:
-        storage.write_meta(path, dict(meta, completed=storage.now()))
-    if info is not None:
-        info.update(
-            compile_seconds=compile_seconds,
-            run_seconds=time.perf_counter() - start - compile_seconds,
-            chunks_computed=len(todo),
-            chunks_loaded=loaded,
-            n_devices=len(devs),
-            batch=batch,
-            chunk_size=size,
-            n_chunks=n_chunks,
-            group=group if batched else 1,
-        )
-    out = {k: np.concatenate([r[k] for r in results], axis=0) for k in spec}
-    return out if inverse is None else {k: v[inverse] for k, v in out.items()}
-
-
-def _permutation(order, n: int) -> np.ndarray:
-    """``order`` as an ``(n,)`` int array holding each of ``0 … n−1`` once (else ``ValueError``)."""
-    a = np.asarray(order)
-    if a.shape != (n,) or a.dtype.kind not in "iu" or not np.array_equal(np.sort(a), np.arange(n)):
-        raise ValueError(
-            f"order must be a permutation of the {n} members (an int array of shape ({n},) "
-            f"holding 0 … {n - 1} once each), got shape {a.shape} and dtype {a.dtype}"
-        )
-    return a
-

@@ -5,16 +5,27 @@ renamed with :func:`os.replace`, which is atomic: a killed run leaves either a c
 chunk file or none, never half of one. ``meta.json`` describes the run (member count,
 chunking, output names, shapes and dtypes, a SHA-256 fingerprint of the inputs, the
 user's metadata and the library versions); a resumed run must match it.
+
+Each chunk file also holds its own index and the run's identity (:func:`run_id`, a
+SHA-256 over the fields of ``meta.json`` a resumed run must match), so a chunk file
+copied to another index or from another run is never loaded as this one.
+
+One driver at a time: :func:`lock` takes an exclusive ``fcntl`` lock on
+``out_dir/.lock`` for as long as a run uses the folder. The operating system releases
+it when the process ends, however it ends (``kill -9`` included), so a killed driver
+leaves no stale lock.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
 import pathlib
 import platform
 import re
+import threading
 import time
 from importlib import metadata as importlib_metadata
 from typing import Any
@@ -27,11 +38,13 @@ __all__ = [
     "chunk_path",
     "fingerprint",
     "load_chunk",
+    "lock",
     "mismatches",
     "now",
     "read_meta",
     "remove_run",
     "remove_stale_temporaries",
+    "run_id",
     "structure",
     "versions",
     "write_atomic",
@@ -41,6 +54,9 @@ __all__ = [
 
 META_NAME = "meta.json"
 CHUNK_PATTERN = "chunk_{:05d}.npz"
+LOCK_NAME = ".lock"
+# The key under which a chunk file stores its index and run identity.
+TAG = "__jrigid_chunk__"
 # Fields of meta.json a resumed run must reproduce exactly.
 MATCHED = (
     "format", "n_members", "chunk_size", "n_chunks", "inputs", "shared", "outputs", "metadata",
@@ -82,7 +98,7 @@ def chunk_path(out_dir: pathlib.Path, index: int) -> pathlib.Path:
 
 def write_atomic(path: pathlib.Path, write) -> None:
     """Call ``write(fh)`` on a temporary file next to ``path``, fsync, rename onto ``path``."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}.tmp")
     try:
         with open(tmp, "wb") as fh:
             write(fh)
@@ -94,25 +110,47 @@ def write_atomic(path: pathlib.Path, write) -> None:
             tmp.unlink()
 
 
-def write_chunk(out_dir: pathlib.Path, index: int, arrays: dict[str, np.ndarray]) -> None:
-    """Write one chunk's outputs atomically as an uncompressed ``.npz``."""
-    write_atomic(chunk_path(out_dir, index), lambda fh: np.savez(fh, **arrays))
+def run_id(meta: dict[str, Any]) -> str:
+    """SHA-256 over the fields of ``meta`` that a resumed run must match (the run's identity)."""
+    matched = {k: meta.get(k, _DEFAULTS.get(k)) for k in MATCHED}
+    return hashlib.sha256(json.dumps(matched, sort_keys=True).encode()).hexdigest()
+
+
+def _tag(index: int, run: str) -> np.ndarray:
+    return np.array(f"{index}:{run}")
+
+
+def write_chunk(
+    out_dir: pathlib.Path, index: int, arrays: dict[str, np.ndarray], run: str
+) -> None:
+    """Write one chunk's outputs atomically as an uncompressed ``.npz``, tagged with
+    ``index`` and the run identity ``run`` (:func:`run_id`)."""
+    tagged = {**arrays, TAG: _tag(index, run)}
+    write_atomic(chunk_path(out_dir, index), lambda fh: np.savez(fh, **tagged))
 
 
 def load_chunk(
-    out_dir: pathlib.Path, index: int, spec: dict[str, tuple[tuple[int, ...], str]], size: int
+    out_dir: pathlib.Path,
+    index: int,
+    spec: dict[str, tuple[tuple[int, ...], str]],
+    size: int,
+    run: str,
 ) -> dict[str, np.ndarray] | None:
     """The outputs stored for chunk ``index``, or ``None`` if absent or not as expected.
 
     ``spec`` maps output names to (per-member shape, dtype string); ``size`` is the
-    chunk's member count. A file that cannot be read or does not match is reported as
-    ``None`` (so it is computed again and overwritten).
+    chunk's member count; ``run`` the run identity (:func:`run_id`). A file that cannot
+    be read, does not match the outputs, or carries another index or run (a file copied
+    or left from elsewhere) is reported as ``None`` (so it is computed again and
+    overwritten).
     """
     path = chunk_path(out_dir, index)
     if not path.exists():
         return None
     try:
         with np.load(path, allow_pickle=False) as data:
+            if TAG not in data.files or data[TAG] != _tag(index, run):
+                return None
             out = {name: data[name] for name in spec}
     except Exception:  # noqa: BLE001 - any unreadable file is recomputed
         return None
@@ -170,6 +208,54 @@ def remove_run(out_dir: pathlib.Path) -> None:
     meta = out_dir / META_NAME
     if meta.exists():
         meta.unlink()
+
+
+_HELD: set[str] = set()  # folders locked by this process
+
+
+@contextlib.contextmanager
+def lock(out_dir: pathlib.Path):
+    """Hold an exclusive lock on ``out_dir/.lock`` for one driver (a context manager).
+
+    Raises ``ValueError`` if another process holds it (naming the host and process id
+    recorded in the file). The lock is an ``fcntl.lockf`` lock, released by the operating
+    system when its holder exits or is killed; it works on local file systems and on NFS
+    with a lock manager. Within one process a second lock on the same folder is refused
+    too. Where ``fcntl`` does not exist (Windows) only the latter holds.
+    """
+    path = pathlib.Path(out_dir) / LOCK_NAME
+    key = str(path.resolve())
+    if key in _HELD:
+        raise ValueError(
+            f"{path.parent} is in use by another run in this process: one run per out_dir "
+            "at a time"
+        )
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX
+        fcntl = None
+    with open(path, "a+") as fh:
+        if fcntl is not None:
+            try:
+                fcntl.lockf(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                fh.seek(0)
+                holder = fh.read().strip() or "unknown"
+                raise ValueError(
+                    f"{path.parent} is in use by another run ({holder}): wait for it to "
+                    "finish or choose another out_dir (the lock goes when that process "
+                    "ends; its finished chunks are kept)"
+                ) from None
+        fh.seek(0)
+        fh.truncate()
+        fh.write(f"host {platform.node()}, pid {os.getpid()}, since {now()}\n")
+        fh.flush()
+        _HELD.add(key)
+        try:
+            yield path
+        finally:
+            _HELD.discard(key)
+    # closing the file released the lockf lock
 
 
 def now() -> str:

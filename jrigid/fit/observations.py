@@ -3,7 +3,7 @@
 Each observation holds sample times ``ts (T,)``, data and a noise level ``sigma``, and
 turns a :class:`Prediction` at those times into whitened residuals ``r`` (independent,
 unit variance if the model is right). Its negative log-likelihood is ``½ Σ r²``
-(:meth:`loss`); the Gauss–Newton covariance of :func:`jrigid.fit.laplace` is built from
+(:meth:`Observation.loss`); the Gauss–Newton covariance of :func:`jrigid.fit.laplace` is built from
 the Jacobian of ``r``.
 
 - :class:`Gyroscope` — angular velocity (body principal frame, the body's reference

@@ -77,7 +77,7 @@ class FusedRungeKutta(diffrax.AbstractAdaptiveSolver):
     Subclasses set :attr:`tableau` (a ``diffrax.ButcherTableau`` of an explicit pair
     whose last stage is evaluated at the step's end, first-same-as-last),
     :attr:`interpolation_cls` (a :class:`PolynomialInterpolation` subclass over all the
-    stages) and :meth:`order`. ``terms`` must be a single ``diffrax.ODETerm``.
+    stages) and ``order``. ``terms`` must be a single ``diffrax.ODETerm``.
     """
 
     tableau: ClassVar[diffrax.ButcherTableau]

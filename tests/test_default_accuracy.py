@@ -1,0 +1,48 @@
+"""Accuracy per tolerance of ``simulate``'s default on every hard case (small size).
+
+For each float64 case of ``benchmarks/hard_cases.py`` with an orientation (torque-free
+bodies, heavy tops, the published checks), the default call's final-time error (relative
+ω, sign-invariant q) against the case's closed-form reference is compared with the
+``quaternion_omega`` form at the same tolerance: within 10·rtol wherever that form is,
+and never more than twice its error or twice rtol, whichever is larger.
+"""
+
+from __future__ import annotations
+
+import pathlib
+import sys
+
+import jax.numpy as jnp
+import pytest
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / "benchmarks"))
+
+import hard_cases as hc  # noqa: E402
+import harness  # noqa: E402
+
+from jrigid import simulate  # noqa: E402
+
+CASES = [k for k, c in hc.CASES.items()
+         if c.dtype != "float32" and k not in ("gimbal_lock", "long_horizon")]
+
+
+def _error(traj, ref):
+    return max(harness.omega_error(traj.omega[-1], ref["omega"]),
+               harness.quaternion_error(traj.q[-1], ref["q"]))
+
+
+@pytest.mark.parametrize("key", CASES)
+def test_default_is_as_accurate_as_the_first_order_form(key):
+    case = hc.CASES[key]
+    ref = hc.reference(case, "small")
+    prob = hc.problem(case, "small")
+    ts = jnp.array([0.0, ref["t1"]])
+    floor = ref["floor"] or 0.0
+    for rtol in (1e-6, 1e-10):
+        kw = dict(rtol=rtol, atol=1e-2 * rtol, max_steps=1_000_000)
+        default = _error(simulate(prob.scene(), prob.state(), ts, **kw), ref)
+        omega_form = _error(simulate(prob.scene(), prob.state(), ts,
+                                     formulation="quaternion_omega", **kw), ref)
+        assert default <= max(2 * omega_form, 2 * rtol) + 2 * floor, (rtol, default, omega_form)
+        if omega_form <= 10 * rtol:
+            assert default <= 10 * rtol + 2 * floor, (rtol, default, omega_form)

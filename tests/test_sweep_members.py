@@ -1,0 +1,131 @@
+"""One bad member never stops a sweep: invalid inputs and failures in simulate_many.
+
+An invalid member (zero quaternion, NaN angular velocity) gets ``invalid_input`` and NaN
+outputs and the others come out as without it; a member that fails inside a shared-step
+group (its step budget) does not take its group mates with it (the group is solved again
+member by member); the sweep names how many and the first. The same holds for
+``jax.vmap(simulate(..., throw=False))``.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jrigid import RigidBody, Scene, ensemble, initial, simulate
+from jrigid.state import State
+from jrigid.trajectory import Result
+
+SCENE = Scene(RigidBody(jnp.asarray([1.0, 2.0, 3.0])))
+TS = np.linspace(0.0, 10.0, 3)
+
+
+def final(traj):
+    return {"q": traj.q[-1], "omega": traj.omega[-1], "steps": traj.stats["num_steps"]}
+
+
+def states_of(omegas) -> State:
+    return jax.vmap(lambda w: initial.from_omega(None, w))(jnp.asarray(omegas))
+
+
+def spoil(states: State, zero_q: int, nan_omega: int) -> State:
+    q, qdot = np.array(states.q), np.array(states.qdot)
+    q[zero_q] = 0.0
+    qdot[nan_omega, 1] = np.nan
+    return State(jnp.asarray(q), jnp.asarray(qdot))
+
+
+def at_rest(states: State, members) -> State:
+    """``states`` with ``members`` replaced by the identity orientation at rest."""
+    q, qdot = np.array(states.q), np.array(states.qdot)
+    q[members] = [1.0, 0.0, 0.0, 0.0]
+    qdot[members] = 0.0
+    return State(jnp.asarray(q), jnp.asarray(qdot))
+
+
+def test_invalid_members_are_named_and_leave_the_others_alone():
+    """Members 0 (zero quaternion) and 4 (NaN ω) are invalid. The others come out bit for
+    bit as in the sweep where those two are valid bodies at rest (which add nothing to a
+    shared step's error), per member and in a shared step alike."""
+    omegas = np.random.default_rng(0).normal(size=(6, 3))
+    bad = spoil(states_of(omegas), zero_q=0, nan_omega=4)
+    rest = at_rest(states_of(omegas), [0, 4])
+    keep = [1, 2, 3, 5]
+    outs = {}
+    for shared_step in (False, True):
+        kwargs = dict(summary=final, chunk_size=6, progress=False, shared_step=shared_step)
+        info: dict = {}
+        with pytest.warns(ensemble.SweepWarning,
+                          match=r"2 of 6 members have invalid input \(first: member 0\)"):
+            out = ensemble.simulate_many(SCENE, bad, TS, info=info, **kwargs)
+        assert out["result"].tolist() == [Result.invalid_input, 0, 0, 0, Result.invalid_input, 0]
+        assert np.all(np.isnan(out["omega"][[0, 4]])) and np.all(np.isnan(out["q"][[0, 4]]))
+        assert info["invalid_input"] == 2 and info["first_invalid"] == 0
+        assert info["failed"] == 0 and info["shared_step"] == shared_step
+        reference = ensemble.simulate_many(SCENE, rest, TS, **kwargs)
+        for k in ("q", "omega", "steps", "result"):
+            np.testing.assert_array_equal(out[k][keep], reference[k][keep], err_msg=k)
+        outs[shared_step] = out
+    # the two step controls agree within the tolerance (rtol 1e-8 over 10 time units)
+    np.testing.assert_allclose(outs[True]["omega"][keep], outs[False]["omega"][keep],
+                               atol=1e-6)
+
+
+def test_failed_member_does_not_take_its_group_with_it(tmp_path):
+    """One fast member exhausts max_steps in a shared-step group: the group is solved
+    again per member; the slow members succeed as they do on their own."""
+    omegas = np.array([[0.3, 0.1, 0.2], [0.1, 0.3, -0.2], [30.0, 10.0, 20.0], [0.2, -0.1, 0.3]])
+    states = states_of(omegas)
+    kwargs = dict(summary=final, chunk_size=4, progress=False, max_steps=200)
+    info: dict = {}
+    with pytest.warns(ensemble.SweepWarning,
+                      match=r"1 of 4 members failed \(first: member 2, result max_steps\)"):
+        shared = ensemble.simulate_many(SCENE, states, TS, info=info, out_dir=tmp_path, **kwargs)
+    assert info["shared_step"] and info["failed"] == 1 and info["first_failed"] == 2
+    assert info["solved_again"] == 4 and (tmp_path / "per_member" / "chunk_00000.npz").exists()
+    assert shared["result"].tolist() == [0, 0, Result.max_steps, 0]
+    with pytest.warns(ensemble.SweepWarning):
+        per_member = ensemble.simulate_many(SCENE, states, TS, shared_step=False, **kwargs)
+    slow = [0, 1, 3]
+    np.testing.assert_array_equal(shared["steps"][slow], per_member["steps"][slow])
+    np.testing.assert_allclose(shared["omega"][slow], per_member["omega"][slow], rtol=1e-12)
+    # without the fast member (a slow one twice instead) the shared step succeeds
+    alone = ensemble.simulate_many(SCENE, states_of(omegas[[0, 1, 0, 3]]), TS, info=info,
+                                   **kwargs)
+    assert alone["result"].tolist() == [0, 0, 0, 0] and info["failed"] == 0
+
+
+def test_vmap_simulate_throw_false_isolates_an_invalid_member():
+    omegas = np.random.default_rng(1).normal(size=(3, 3))
+    good = states_of(omegas)
+    bad = spoil(good, zero_q=1, nan_omega=1)
+
+    @jax.jit
+    def sweep(states):
+        traj = jax.vmap(lambda s: simulate(SCENE, s, TS, throw=False))(states)
+        return traj.omega[:, -1], traj.result
+
+    w_bad, r_bad = sweep(bad)
+    w_good, r_good = sweep(good)
+    assert np.asarray(r_bad).tolist() == [0, Result.invalid_input, 0]
+    assert np.asarray(r_good).tolist() == [0, 0, 0]
+    assert np.all(np.isnan(np.asarray(w_bad)[1]))
+    np.testing.assert_array_equal(np.asarray(w_bad)[[0, 2]], np.asarray(w_good)[[0, 2]])
+
+
+def test_failed_groups_follow_chunks_groups_and_order():
+    """Groups are consecutive runs of ``group`` members within each chunk, in computing order."""
+    codes = np.zeros(10, dtype=np.int32)
+    codes[7] = Result.max_steps
+    # chunks of 4 in input order: [0-3], [4-7], [8, 9]; groups of 2: member 7 is in {6, 7}
+    assert ensemble.many.failed_groups(codes, None, 4, 2).tolist() == [6, 7]
+    assert ensemble.many.failed_groups(codes, None, 4, 4).tolist() == [4, 5, 6, 7]
+    # an invalid member or an event is not a failure of its group
+    codes[1], codes[9] = Result.invalid_input, Result.event
+    assert ensemble.many.failed_groups(codes, None, 4, 4).tolist() == [4, 5, 6, 7]
+    # computed in the order 9, 8, ..., 0: member 7 sits at position 2, with 9, 8, 6
+    order = np.arange(10)[::-1]
+    assert ensemble.many.failed_groups(codes, order, 4, 4).tolist() == [9, 8, 7, 6]
+    assert ensemble.many.failed_groups(np.zeros(10, np.int32), order, 4, 4).size == 0
