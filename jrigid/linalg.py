@@ -1,6 +1,6 @@
 """Small-vector linear algebra written out component by component.
 
-Dot products (of 3- and 4-vectors), cross products and ``3 × 3`` solves of rigid-body
+Dot products (of 3- and 4-vectors), unit vectors, cross products and ``3 × 3`` solves of rigid-body
 mechanics, as sums of products rather than reductions or library calls: inside an
 integrator's loop XLA fuses them with their neighbours on a CPU, where each reduction or
 LAPACK call would start a kernel of its own (a step of the quaternion-acceleration

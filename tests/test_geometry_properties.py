@@ -1032,7 +1032,7 @@ def _point_masses(name, data, batch):
     np.testing.assert_allclose(out, expected, rtol=1e-11, atol=1e-11)
 
 
-@case(inertia, "validate", "check")
+@case(inertia, "validate", "check", "conditions")
 def _validate(name, data, batch):
     rng = _rng(data, "moments")
     sides = rng.uniform(0.1, 3.0, size=(3,) + batch)
@@ -1065,6 +1065,16 @@ def _validate(name, data, batch):
         return raises_shape_error(lambda: f(value, **kw), "(..., 3)")
     expected = {"triangle": "triangle", "negative": "positive definite",
                 "nonfinite": "finite", "asymmetric": "symmetric"}.get(kind)
+    if name == "conditions":  # every element flagged under exactly its first failed condition
+        flags = {c: np.asarray(bad) for c, bad, _, _ in f(value, **kw)}
+        assert all(bad.shape == batch for bad in flags.values())
+        first = {"triangle": "triangle inequality Ia + Ib >= Ic violated",
+                 "negative": "not positive definite", "nonfinite": "values not finite",
+                 "asymmetric": "tensor not symmetric"}.get(kind)
+        assert first is None or first in flags
+        for c, bad in flags.items():
+            np.testing.assert_array_equal(bad, c == first)
+        return
     if expected is None:
         np.testing.assert_array_equal(f(value, **kw), value)
     else:
