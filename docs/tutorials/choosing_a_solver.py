@@ -171,17 +171,21 @@ for eps in epsilons:
 # %% [markdown]
 # ## What float32 can and cannot do
 #
-# Every jrigid function runs in float32, and on a GPU float32 is much faster. Three
-# limits decide whether it is good enough:
+# Every jrigid function runs in float32, and on a GPU float32 is much faster. What limits
+# it:
 #
 # 1. **Phase error on long horizons.** The relative error of a step is at least
-#    `eps = 1.2e-7`; over many periods the phase error accumulates like the number of
-#    steps times that.
-# 2. **Near the separatrix** float32 cannot resolve `ε` below about `3e-4`: the energy
-#    rounding `δ ≈ 1e-7` then exceeds `ε²`, and the flip time is wrong by order one.
-# 3. **The time itself.** At `t ≈ 10⁴` float32 time steps are `1e-3` apart: an adaptive
-#    solver with a small step cannot advance (`Result.step_size_collapse`), and even the
-#    exact solver's error is the rounding of `t`.
+#    `eps = 1.2e-7`; over many periods the phase error accumulates with the number of
+#    steps. The smallest tolerance float32 accepts is `rtol = 10 eps ≈ 1.2e-6`.
+# 2. **The separatrix.** An energy rounding of `δ ≈ 1e-7` would carry the orbit across
+#    the separatrix once `ε² < δ` (`ε ≲ 3e-4`) and change the flip time by order one. The
+#    default's projection onto the conserved energy and `|L|` after every step is what
+#    prevents that: measured below, the flip intervals stay within a few `1e-6` of the
+#    closed form down to `ε = 1e-4`.
+# 3. **The time itself.** Near `t = 10⁴` float32 times are `1e-3` apart: over 10⁴
+#    periods an adaptive solver cannot advance its step any more
+#    (`Result.step_size_collapse`, see the [benchmarks](../../benchmarks/)), and even the
+#    exact solver's error is the rounding of `t` (the last column below).
 #
 # JAX decides the precision globally; we switch x64 off for the next cell and back on
 # after it. (Arrays created before keep their dtype, so everything below is built anew.)
@@ -242,5 +246,5 @@ for eps, interval, count, name in sep32:
 # | torques, pivots, gravity, free flight; the general case | the default (`quaternion_acceleration` + Tsit5, projected) |
 # | orientation not needed | `formulation="body_omega"` (ω only; cheapest) |
 # | Euler angles wanted as variables | `formulation="euler_angles"`: reports gimbal lock instead of returning garbage |
-# | float32 | horizons of tens of periods and spins well away from the separatrix (`ε ≳ 1e-3`); check against a float64 run once |
+# | float32 | errors of `1e-4`–`1e-2` over tens to thousands of periods; keep the default projection; check against a float64 run once |
 # | many members | `jrigid.ensemble.simulate_many`, with `shared_step=True` for throughput on a CPU |
