@@ -4,6 +4,8 @@ Tests that exercise the float32 path request the ``float32`` fixture, which
 switches ``jax_enable_x64`` off for the duration of the test.
 """
 
+import gc
+
 import jax
 import pytest
 
@@ -19,3 +21,26 @@ def float32():
         yield
     finally:
         jax.config.update("jax_enable_x64", True)
+
+
+def _mapped_regions() -> int:
+    try:
+        with open("/proc/self/maps", "rb") as f:
+            return sum(1 for _ in f)
+    except OSError:  # not Linux
+        return 0
+
+
+@pytest.fixture(autouse=True)
+def _release_compiled_programs():
+    """Free JAX's compiled programs when they pile up.
+
+    Every compiled XLA:CPU program holds memory mappings of its own; a test process that
+    compiles thousands of them reaches the kernel's ``vm.max_map_count`` (65530) and then
+    crashes inside the compiler. Clearing the caches releases them (they are recompiled on
+    demand).
+    """
+    yield
+    if _mapped_regions() > 20_000:
+        jax.clear_caches()
+        gc.collect()
