@@ -108,9 +108,13 @@ def test_jacobians_match_forward_mode_diffrax(jacobians, name):
     fwd, ref, state, ref_state = jacobians[name]
     assert np.all(np.isfinite(fwd))
     np.testing.assert_allclose(state, ref_state, rtol=0, atol=1e-11)
+    # Near a sphere the reference's own derivatives carry about eps/δ per step (the
+    # invariant projection's energy-like residual over a gradient of size δ; see
+    # jrigid.invariants): 1e-10 at δ = 1e-6, 2e-9 at δ = 1e-9.
+    tol = 1e-8 if name.startswith("near_sphere") else 1e-11
     for k in range(len(TS)):
         scale = max(1.0, np.abs(ref[k]).max())
-        assert np.abs(fwd[k] - ref[k]).max() <= 1e-11 * scale, (TS[k], fwd[k] - ref[k])
+        assert np.abs(fwd[k] - ref[k]).max() <= tol * scale, (TS[k], fwd[k] - ref[k])
     # At t = 0 the state is the input: d omega/d omega0 = 1, nothing depends on the moments.
     np.testing.assert_allclose(fwd[0][4:], np.hstack([np.zeros((3, 3)), np.eye(3)]), atol=1e-15)
     np.testing.assert_allclose(fwd[0][:4], 0.0, atol=1e-15)
