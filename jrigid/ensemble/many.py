@@ -97,8 +97,8 @@ def simulate_many(
             default :func:`default_summary` (``q``, ``omega`` at ``ts``, ``result``,
             ``num_steps``). Reduce here (e.g. final state only) to save memory and disk.
             ``result`` is always kept (added when the summary lacks it).
-        chunk_size, out_dir, metadata, resume, progress, devices, info, order, executor,
-            compile_cache: as in :func:`run` (``executor``: a Dask
+        chunk_size, out_dir, metadata, resume, progress, devices: as in :func:`run`.
+        info, order, executor, compile_cache: as in :func:`run` (``executor``: a Dask
             ``Client.get_executor()``, a ``ProcessPoolExecutor``, ...: the same call on
             one machine, a workstation pool or a cluster). ``ts``, the scene (when
             fixed), ``rtol``, ``atol`` and ``dt0`` are passed as ``run``'s traced
