@@ -224,6 +224,32 @@ def test_floor_and_entry_points_reject_bad_input():
         contact.simulate_bounces(scene, low, [0.0, 1.0])
 
 
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"contact_tol": -1e-3}, "contact_tol must be a finite number > 0"),
+        ({"contact_tol": float("nan")}, "contact_tol must be a finite number > 0"),
+        ({"min_gap": -1.0}, "min_gap must be a finite number > 0"),
+        ({"min_gap": 0.0}, "min_gap must be a finite number > 0"),
+        ({"min_gap": float("inf")}, "min_gap must be a finite number > 0"),
+        ({"rapid_bounces": 0}, "rapid_bounces must be an int >= 1"),
+        ({"rapid_bounces": True}, "rapid_bounces must be an int >= 1"),
+        ({"rapid_bounces": 2.5}, "rapid_bounces must be an int >= 1"),
+        ({"max_bounces": -1}, "max_bounces must be an int >= 0"),
+    ],
+)
+def test_simulate_bounces_refuses_bad_resting_and_contact_settings(kwargs, message):
+    """A negative contact_tol used to let the box fall through the floor, NaN to end in
+    "failed" with no cause and min_gap < 0 in an internal diffrax error."""
+    pts = contact.box_corners((1.0, 1.0, 1.0))
+    body = RigidBody(inertia.box(1.0, 1.0, 1.0, 1.0), 1.0)
+    scene = Scene(body, FreeFlight(), (Gravity(), contact.Floor(pts)))
+    state = initial.from_omega(None, (0.0, 0.0, 0.0), x=(0.0, 0.0, 2.0), v=(0.0, 0.0, 0.0))
+    with pytest.raises(ValueError, match=message):
+        contact.simulate_bounces(scene, state, [0.0, 1.0], **kwargs)
+
+
 # --------------------------------------------------------------------------- bouncing ball
 
 

@@ -135,6 +135,27 @@ def test_good_fit_succeeds_with_chi2_dof_near_one(example):
     assert bool(jnp.all(jnp.abs(m - TRUE_MOMENTS) < 4 * m_sigma))
 
 
+
+def test_fit_from_a_sphere_moves_the_shape_or_says_it_failed(example):
+    """From ``moment_ratios(zeros(2))`` (a sphere) the exact model's derivative with respect
+    to the shape is not zero (it used to be, so L-BFGS stopped at once, "converged", at
+    χ²/dof ~ 1e4). The shape moves; the fit ends at the truth or is flagged."""
+    problem, data = tumbling(example)
+    start = {"shape": jnp.zeros(2), "omega0": jnp.asarray(data[0])}
+    grad = jax.grad(lambda p: problem.loss(p))(start)
+    assert float(jnp.max(jnp.abs(grad["shape"]))) > 1.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", fit.FitWarning)
+        res = fit.fit(problem, start)
+    m = np.asarray(fit.moment_ratios(res.params["shape"]))
+    assert np.ptp(m) > 0.05  # no longer a sphere
+    assert res.n_iter > 2
+    if res.success:
+        assert res.chi2_dof < 2.0
+        np.testing.assert_allclose(m, TRUE_MOMENTS, atol=0.02)
+    else:
+        assert res.chi2_dof > 2.0 or res.causes
+
 def test_wrong_local_optimum_is_flagged():
     """A frequency fit from f = 0.5 (truth 2) stops at a local optimum: converged, not success."""
     problem, ts, data = wave_problem()

@@ -73,6 +73,31 @@ def test_invalid_members_are_named_and_leave_the_others_alone():
                                atol=1e-6)
 
 
+
+def body_of(moments):
+    return Scene(RigidBody(moments))
+
+
+def test_member_with_a_non_physical_body_is_named():
+    """A per-member body violating the triangle inequality ((1, 1, 3)) is invalid input;
+    the other members come out as they do on their own."""
+    omegas = np.random.default_rng(1).normal(size=(4, 3))
+    moments = np.array([[1.0, 2.0, 3.0], [1.0, 2.0, 2.5], [1.0, 1.0, 3.0], [2.0, 2.0, 3.0]])
+    states = states_of(omegas)
+    for shared_step in (False, True):
+        info: dict = {}
+        with pytest.warns(ensemble.SweepWarning,
+                          match=r"1 of 4 members have invalid input \(first: member 2\)"):
+            out = ensemble.simulate_many(body_of, states, TS, params=jnp.asarray(moments),
+                                         summary=final, chunk_size=4, progress=False,
+                                         info=info, shared_step=shared_step)
+        assert out["result"].tolist() == [0, 0, Result.invalid_input, 0]
+        assert np.all(np.isnan(out["omega"][2])) and info["first_invalid"] == 2
+        for i in (0, 1, 3):
+            alone = simulate(Scene(RigidBody(jnp.asarray(moments[i]))),
+                             initial.from_omega(None, jnp.asarray(omegas[i])), TS)
+            np.testing.assert_allclose(out["omega"][i], alone.omega[-1], rtol=0, atol=1e-6)
+
 def test_failed_member_does_not_take_its_group_with_it(tmp_path):
     """One fast member exhausts max_steps in a shared-step group: the group is solved
     again per member; the slow members succeed as they do on their own."""
