@@ -110,8 +110,8 @@ def test_jacobians_match_forward_mode_diffrax(jacobians, name):
     np.testing.assert_allclose(state, ref_state, rtol=0, atol=1e-11)
     # Near a sphere the reference's own derivatives carry about eps/δ per step (the
     # invariant projection's energy-like residual over a gradient of size δ; see
-    # jrigid.invariants): 1e-10 at δ = 1e-6, 2e-9 at δ = 1e-9.
-    tol = 1e-8 if name.startswith("near_sphere") else 1e-11
+    # jrigid.invariants): up to 2e-10 at δ = 1e-6, 7e-8 at δ = 1e-9 (t = 5).
+    tol = 1e-6 if name.startswith("near_sphere") else 1e-11
     for k in range(len(TS)):
         scale = max(1.0, np.abs(ref[k]).max())
         assert np.abs(fwd[k] - ref[k]).max() <= tol * scale, (TS[k], fwd[k] - ref[k])

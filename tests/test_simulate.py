@@ -229,8 +229,12 @@ def test_vmap_failure_flags_per_member():
                                                  Result.max_steps])
     assert np.all(np.isfinite(np.asarray(trajs.q[:2])))
     assert np.isnan(np.asarray(trajs.q[2, -1])).all()
-    with pytest.raises(eqx.EquinoxRuntimeError, match="max_steps=100000 exhausted"):
+    with pytest.raises(eqx.EquinoxRuntimeError, match="max_steps=100000 exhausted") as err:
         jax.block_until_ready(_batched_run(BATCH_MOMENTS, omegas, True).q)
+    # readable under jit: the cause first, then the remedy
+    text = str(err.value)
+    cause = text.index("jrigid.simulate failed: max_steps=100000 exhausted")
+    assert cause < text.index("raise max_steps, loosen rtol/atol") < text.index("throw=False")
 
 
 GRAD_MOMENTS = jnp.array([1.5, 2.0, 3.0])
