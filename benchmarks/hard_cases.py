@@ -15,6 +15,9 @@ at a full size (for ``benchmarks/work_precision.py``) and a small size (for
    with spin ω3 = 20× and 100× the slow precession rate ``Mgl/(I3 ω3)``, 20 nutation
    periods; the nutation period and amplitude against the analytic values;
 6. ``long_horizon`` — case 1 over 10⁴ periods: drift of energy, ``|L|`` and ``|q|``;
+   ``top_long_horizon`` — the fast top of case 5 (20×) over 10⁴ nutation periods: drift
+   of energy and of the vertical momentum (where fixed-step splitting competes with
+   adaptive methods);
 7. ``*_f32`` — float32 versions of 1, 2 (ε = 1e-2) and 6;
 8. ``gimbal_lock`` — a sleeping top at θ0 = 1e-3: the Euler-angle formulation must
    report gimbal lock, the quaternion formulations must not;
@@ -31,8 +34,8 @@ scaling, see :func:`diagonal_map`) of a physical body:
 References (never a method under test): torque-free cases use ``jrigid.exact`` (closed
 form), cross-checked with scipy DOP853 at rtol 1e-13 up to 2000 time units; the tops use
 ``jrigid.lagrange_top`` (the heavy symmetric top in closed form), cross-checked with scipy
-DOP853 at rtol 1e-13 on the (q, ω) equations and with the analytic ``cos θ(t)`` of
-:func:`top_analytic`. Periods (:func:`free_period`) and the top's
+DOP853 at rtol 1e-13 on the (q, ω) equations (also up to 2000 time units) and with the
+analytic ``cos θ(t)`` of :func:`top_analytic`. Periods (:func:`free_period`) and the top's
 nutation (:func:`top_analytic`) come from the classical formulae with scipy's elliptic
 functions, independent of ``jrigid.special``.
 
@@ -234,6 +237,9 @@ def _cases() -> dict[str, Case]:
         ],
         Case("long_horizon", "6", "case 1 over 10⁴ periods", periods=1e4, small_periods=100,
              checks="drift of energy, |L|, |q|", **general),
+        Case("top_long_horizon", "6", "case 5 (fast top, 20×) over 10⁴ nutation periods",
+             moments=(1.0, 1.0, 1.5), tilt=0.5, spin_ratio=20.0, periods=1e4,
+             small_periods=100, checks="drift of energy and vertical momentum"),
         Case("general_f32", "7", "case 1 in float32", periods=100, small_periods=3,
              dtype="float32", checks="float32 error bounds", **general),
         Case("separatrix_1e-2_f32", "7", "case 2 (ε = 1e-2) in float32",
@@ -428,16 +434,18 @@ def reference(case: Case, size: str = "full") -> dict:
         out["seconds"] = time.perf_counter() - start
         return out
     q, w = top_final(case, t1)
-    with jax.enable_x64(True):
-        y0 = prob.y0()
-    dop = _dop853(prob.numpy_rhs(), y0, t1)
-    floor = max(harness.omega_error(dop.y[4:, -1], w),
-                harness.quaternion_error(dop.y[:4, -1] / np.linalg.norm(dop.y[:4, -1]), q))
-    return {"q": q, "omega": w, "t1": t1,
-            "source": "jrigid.lagrange_top (closed form), float64",
-            "floor": floor,
-            "check": f"scipy DOP853 at rtol 1e-13 on the (q, ω) equations agrees to {floor:.2g}",
-            "seconds": time.perf_counter() - start}
+    out = {"q": q, "omega": w, "t1": t1, "source": "jrigid.lagrange_top (closed form), float64",
+           "floor": None, "check": "none (horizon > 2000: see tests/test_lagrange_top.py)"}
+    if t1 <= 2000:
+        with jax.enable_x64(True):
+            y0 = prob.y0()
+        dop = _dop853(prob.numpy_rhs(), y0, t1)
+        floor = max(harness.omega_error(dop.y[4:, -1], w),
+                    harness.quaternion_error(dop.y[:4, -1] / np.linalg.norm(dop.y[:4, -1]), q))
+        out["floor"] = floor
+        out["check"] = f"scipy DOP853 at rtol 1e-13 on the (q, ω) equations agrees to {floor:.2g}"
+    out["seconds"] = time.perf_counter() - start
+    return out
 
 
 def top_final(case: Case, t1: float) -> tuple[np.ndarray, np.ndarray]:

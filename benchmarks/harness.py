@@ -537,6 +537,66 @@ def write_text(path: str | os.PathLike, text: str) -> pathlib.Path:
     return path
 
 
+PALETTE = [f"C{i}" for i in range(10)] + [
+    "olive", "navy", "brown", "teal", "magenta", "black", "gold", "lime", "crimson",
+    "slategray", "orchid", "peru", "darkgreen", "steelblue", "salmon",
+]
+
+
+def _colours(panels) -> dict[str, str]:
+    """One colour per method label, the same in every panel."""
+    labels = list(dict.fromkeys(label for curves in panels.values() for label in curves))
+    return {label: PALETTE[i % len(PALETTE)] for i, label in enumerate(labels)}
+
+
+def _style(label: str, n_points: int, highlight: Sequence[str]) -> dict[str, Any]:
+    """Line style of a method: peers dashed with squares, fixed-step splitting dash-dotted
+    with diamonds, a single run a star, highlighted labels thick."""
+    peer = not label.startswith("jrigid")
+    splitting = label.startswith("jrigid splitting")
+    marker = "s" if peer else "D" if splitting else "o"
+    return dict(
+        marker="*" if n_points == 1 else marker,
+        markersize=11 if n_points == 1 else 3.5,
+        linestyle="--" if peer else "-." if splitting else "-",
+        linewidth=2.8 if label in highlight else 1.1,
+    )
+
+
+def _draw_panel(ax, name, curves, colour, *, targets, highlight, wrap: int,
+                fontsize: float) -> dict[str, Any]:
+    """One work-precision panel (error on x, inverted; time on y; log-log): its lines."""
+    handles = {}
+    for label, (errs, times) in curves.items():
+        pts = sorted(
+            (e, t) for e, t in zip(errs, times, strict=True)
+            if e is not None and math.isfinite(e) and e > 0
+        )
+        if not pts:
+            continue
+        xs, ys = zip(*pts, strict=True)
+        (line,) = ax.loglog(xs, ys, color=colour[label], label=label,
+                            **_style(label, len(pts), highlight))
+        handles[label] = line
+    for target in targets:
+        ax.axvline(target, color="0.7", linestyle=":", linewidth=0.8)
+    ax.set_title("\n".join(textwrap.wrap(name, wrap)), fontsize=fontsize + 1)
+    ax.set_xlabel("final error (worst of relative ω and q)", fontsize=fontsize)
+    ax.set_ylabel("wall time after compilation [s]", fontsize=fontsize)
+    ax.invert_xaxis()
+    ax.grid(True, which="major", alpha=0.3)
+    return handles
+
+
+def _save(fig, path, title: str, dpi: int) -> pathlib.Path:
+    if title:
+        fig.suptitle(title, fontsize=8)
+    path = pathlib.Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=dpi)
+    return path
+
+
 def work_precision_figure(
     panels: dict[str, dict[str, tuple[Sequence[float], Sequence[float]]]],
     path: str | os.PathLike,
@@ -545,7 +605,9 @@ def work_precision_figure(
     highlight: Sequence[str] = (),
     title: str = "",
 ) -> pathlib.Path:
-    """Work-precision diagram: final error (x) against wall time (y), log-log.
+    """Work-precision diagram: final error (x) against wall time (y), log-log, one row.
+
+    Each panel carries its own legend; styles as in :func:`work_precision_grid`.
 
     Args:
         panels: ``{panel title: {method label: (errors, times)}}``, one subplot each.
@@ -564,43 +626,12 @@ def work_precision_figure(
     fig = Figure(figsize=(6.4 * n, 5.6), layout="constrained")
     FigureCanvasAgg(fig)
     axes = fig.subplots(1, n, squeeze=False)[0]
-    labels = list(dict.fromkeys(label for curves in panels.values() for label in curves))
-    palette = [f"C{i}" for i in range(10)] + ["olive", "navy", "brown", "teal", "magenta"]
-    colour = {label: palette[i % len(palette)] for i, label in enumerate(labels)}
+    colour = _colours(panels)
     for ax, (name, curves) in zip(axes, panels.items(), strict=False):
-        for label, (errs, times) in curves.items():
-            pts = sorted(
-                (e, t) for e, t in zip(errs, times, strict=True)
-                if e is not None and math.isfinite(e) and e > 0
-            )
-            if not pts:
-                continue
-            xs, ys = zip(*pts, strict=True)
-            scipy_run = label.startswith("scipy")
-            ax.loglog(
-                xs,
-                ys,
-                marker="s" if scipy_run else "o",
-                markersize=4,
-                linestyle="--" if scipy_run else "-",
-                linewidth=2.8 if label in highlight else 1.2,
-                color=colour[label],
-                label=label,
-            )
-        for target in targets:
-            ax.axvline(target, color="0.7", linestyle=":", linewidth=0.8)
-        ax.set_title("\n".join(textwrap.wrap(name, 60)), fontsize=10)
-        ax.set_xlabel("final error (worst of relative ω and q)")
-        ax.set_ylabel("wall time after compilation [s]")
-        ax.invert_xaxis()
-        ax.grid(True, which="major", alpha=0.3)
+        _draw_panel(ax, name, curves, colour, targets=targets, highlight=highlight, wrap=60,
+                    fontsize=9)
         ax.legend(fontsize=6.5, loc="upper left")
-    if title:
-        fig.suptitle(title, fontsize=8)
-    path = pathlib.Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    return path
+    return _save(fig, path, title, dpi=160)
 
 
 def work_precision_grid(
@@ -614,9 +645,10 @@ def work_precision_grid(
 ) -> pathlib.Path:
     """Work-precision diagrams of several problems on a grid, one legend for all.
 
-    Like :func:`work_precision_figure` (error on x, inverted; time on y; log-log), with
-    ``ncols`` panels a row. Methods not starting with ``"jrigid"`` (the peers) are drawn
-    dashed with square markers; a method with a single run is drawn as a star.
+    Error on x (inverted), time on y, log-log, ``ncols`` panels a row. Methods not
+    starting with ``"jrigid"`` (the peers) are drawn dashed with square markers, the
+    fixed-step splitting methods dash-dotted with diamonds, a method with a single run as
+    a star; a method keeps its colour in every panel.
 
     Args:
         panels: ``{panel title: {method label: (errors, times)}}``.
@@ -638,46 +670,13 @@ def work_precision_grid(
     fig = Figure(figsize=(6.0 * ncols + 3.2, 4.6 * nrows), layout="constrained")
     FigureCanvasAgg(fig)
     axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
-    labels = list(dict.fromkeys(label for curves in panels.values() for label in curves))
-    palette = [f"C{i}" for i in range(10)] + [
-        "olive", "navy", "brown", "teal", "magenta", "black", "gold", "lime", "crimson",
-        "slategray", "orchid", "peru", "darkgreen", "steelblue", "salmon",
-    ]
-    colour = {label: palette[i % len(palette)] for i, label in enumerate(labels)}
+    colour = _colours(panels)
     handles: dict[str, Any] = {}
     for ax, (name, curves) in zip(axes, panels.items(), strict=False):
-        for label, (errs, times) in curves.items():
-            pts = sorted(
-                (e, t) for e, t in zip(errs, times, strict=True)
-                if e is not None and math.isfinite(e) and e > 0
-            )
-            if not pts:
-                continue
-            xs, ys = zip(*pts, strict=True)
-            peer = not label.startswith("jrigid")
-            (line,) = ax.loglog(
-                xs, ys,
-                marker="*" if len(pts) == 1 else ("s" if peer else "o"),
-                markersize=11 if len(pts) == 1 else 3.5,
-                linestyle="--" if peer else "-",
-                linewidth=2.8 if label in highlight else 1.1,
-                color=colour[label],
-                label=label,
-            )
+        for label, line in _draw_panel(ax, name, curves, colour, targets=targets,
+                                       highlight=highlight, wrap=55, fontsize=8).items():
             handles.setdefault(label, line)
-        for target in targets:
-            ax.axvline(target, color="0.7", linestyle=":", linewidth=0.8)
-        ax.set_title("\n".join(textwrap.wrap(name, 55)), fontsize=9)
-        ax.set_xlabel("final error (worst of relative ω and q)", fontsize=8)
-        ax.set_ylabel("wall time after compilation [s]", fontsize=8)
-        ax.invert_xaxis()
-        ax.grid(True, which="major", alpha=0.3)
     for ax in axes[n:]:
         ax.set_visible(False)
     fig.legend(list(handles.values()), list(handles), loc="outside right center", fontsize=7)
-    if title:
-        fig.suptitle(title, fontsize=8)
-    path = pathlib.Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    return path
+    return _save(fig, path, title, dpi=100)

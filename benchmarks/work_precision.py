@@ -13,19 +13,25 @@ For each case of ``benchmarks/hard_cases.py`` (full size) this runs
   ``Dopri5``, the 10⁴-period case runs three (formulation, solver) pairs at rtol 1e-6 …
   1e-10, the float32 cases four pairs at rtol 1e-3 … 2e-6);
 - the chapter's leapfrog (:mod:`jrigid.leapfrog`) at several step sizes;
-- the exact solver (``simulate(solver="exact")``, torque-free cases);
+- on the tops, the exact-flow splitting methods (:mod:`jrigid.splitting`: Strang, order 2;
+  Yoshida and Suzuki, order 4; Kahan–Li, orders 6 and 8) at several fixed steps;
+- the exact solver (``simulate(solver="exact")``: :mod:`jrigid.exact` torque free,
+  :mod:`jrigid.lagrange_top` on the tops);
 - scipy ``solve_ivp`` DOP853, RK45 and LSODA on the same equations (numpy right-hand
-  side of ``speed_vs_error.Problem``; DOP853 only in float32 cases, none over 10⁴ periods,
-  where one run at rtol 1e-4 takes 13 s);
+  side of ``speed_vs_error.Problem``; DOP853 only in float32 cases and on the top over 10⁴
+  nutation periods, none on the free rotor over 10⁴ periods, where one run at rtol 1e-4
+  takes 13 s for an error of 0.4);
 - MuJoCo (optional ``bench`` extra): a free joint (torque-free cases) or a ball joint
-  under gravity (tops), integrators ``RK4`` and ``implicitfast`` at several time steps.
+  under gravity (tops), integrators ``RK4`` and ``implicitfast`` at several time steps
+  (``RK4`` only on the top over 10⁴ nutation periods).
   MuJoCo's free/ball-joint quaternion is body → world, scalar first, and the angular
   velocity in ``qvel`` is in the body frame, as jrigid's (checked against
   ``jrigid.exact`` at a small step: agreement to 1e-14).
 
 Each case also runs its own check: the flip times near the separatrix (case 2), the top's
 nutation period and amplitude (case 5), the published solutions and invariants (B5, HNW),
-the drift of energy, ``|L|`` and ``|q|`` (case 6) and gimbal lock (case 8).
+the drift of energy, ``|L|`` (or the vertical momentum of the top) and ``|q|`` (case 6)
+and gimbal lock (case 8).
 
 The error is the worst of the relative final ω error and the sign-invariant final ``q``
 error, against :func:`hard_cases.reference` (``jrigid.exact`` or scipy DOP853 at rtol
@@ -72,6 +78,8 @@ import harness  # noqa: E402
 
 from jrigid.integrate import simulate  # noqa: E402
 from jrigid.leapfrog import leapfrog  # noqa: E402
+from jrigid.splitting import Splitting  # noqa: E402
+from jrigid.state import Kinematics  # noqa: E402
 
 TARGETS = (1e-4, 1e-8)
 TARGETS_F32 = (1e-2, 1e-4)
@@ -87,19 +95,26 @@ TOLS_F32 = (1e-3, 1e-4, 1e-5, 2e-6)
 STEPS_PER_SCALE = (10, 100, 300, 1000, 3000)  # fixed steps: dt = time_scale / k
 STEPS_QUICK = (10, 100, 1000)
 STEPS_LONG = (10, 100)
+SPLITTINGS = ("strang", "yoshida4", "suzuki4", "kahan_li6", "kahan_li8")
+SPLITTINGS_QUICK = ("strang", "kahan_li6")
+SPLITTINGS_LONG = ("kahan_li6", "kahan_li8")
+STEPS_SPLIT = (3, 10, 30, 100, 300, 1000, 3000)  # dt = time_scale / k, coarse to fine
+STEPS_SPLIT_LONG = (2, 3, 5)
+SPLIT_MAX_STEPS = 2_000_000  # compiled loop bound (steps past the need are skipped)
 MAX_STEPS = 4_000_000
 REPEATS = 3
 MIN_TIME = 0.03  # seconds of samples per point at least (more samples for fast calls)
 SLOW = 0.25  # calls slower than this are timed once (their first call)
 BUDGET = 2.0  # a call slower than this ends the method's sweep
-BUDGET_LONG = 15.0  # the same for the 10⁴-period cases (every call is long there)
+BUDGET_LONG = 40.0  # the same for the 10⁴-period cases (every call is long there)
 
 FULL_CASES = ("general", "separatrix_1e-2", "separatrix_1e-4", "separatrix_1e-6",
               "nearly_symmetric", "thin_rod", "top_fast_20", "top_fast_100", "long_horizon",
-              "general_f32", "separatrix_1e-2_f32", "long_horizon_f32", "detest_b5",
-              "hairer_rigid_body")
+              "top_long_horizon", "general_f32", "separatrix_1e-2_f32", "long_horizon_f32",
+              "detest_b5", "hairer_rigid_body")
 QUICK_CASES = ("general", "separatrix_1e-6", "top_fast_100")
-FIGURE_CASES = ("general", "separatrix_1e-6", "top_fast_100", "long_horizon")
+FIGURE_CASES = ("general", "separatrix_1e-6", "top_fast_20", "top_fast_100", "long_horizon",
+                "top_long_horizon")
 
 
 # --------------------------------------------------------------------------- compiled solvers
@@ -188,6 +203,31 @@ def leapfrog_runner(case, size, cache: Compiled):
     return run, seconds
 
 
+def splitting_runner(case, size, method, cache: Compiled):
+    """``(run(dt), compile_seconds)`` for ``simulate(solver=Splitting(method, dt=dt))``."""
+    prob = hc.problem(case, size)
+    with _x64(case):
+        scene, state = prob.scene(), prob.state()
+        dtype = scene.body.moments.dtype
+        ts = jnp.array([0.0, prob.t1], dtype=dtype)
+
+    def build():
+        def solve(scene, state, ts, dt):
+            solver = Splitting(method, dt=dt, max_steps=SPLIT_MAX_STEPS)
+            return _final(simulate(scene, state, ts, solver=solver, throw=False), dtype)
+
+        with _x64(case):
+            return harness.compile_jax(jax.jit(solve), scene, state, ts, jnp.asarray(0.1, dtype))
+
+    fn, seconds = cache.get((_kind(case), case.dtype, f"splitting {method}"), build)
+
+    def run(dt):
+        with _x64(case):
+            return fn(scene, state, ts, jnp.asarray(dt, dtype))
+
+    return run, seconds
+
+
 def exact_runner(case, size, cache: Compiled):
     """``(run(_), compile_seconds)`` for ``simulate(solver="exact")``."""
     prob = hc.problem(case, size)
@@ -271,7 +311,26 @@ def mujoco_runner(case, size, integrator):
 
 
 def errors_against(ref: dict, case: hc.Case):
-    """``error(out) -> ({name: error}, {name: drift})`` against the reference's final state."""
+    """``error(out) -> ({name: error}, {name: drift})`` against the reference's final state.
+
+    Drifts are relative: torque free, of energy, ``|L|`` and ``|q|``; on a top, of the total
+    energy and of the momentum along gravity, each over the size of its terms
+    (:meth:`jrigid.scene.Scene.conserved`'s ``scales``), and of ``|q|``.
+    """
+    if not case.torque_free:
+        with jax.enable_x64(True):
+            prob = hc.problem(case, "small")
+            scene64, state64 = prob.scene(), prob.state()
+            start = scene64.conserved(Kinematics(state64.q, state64.omega))
+            c0, scales = np.asarray(start.values, float), np.asarray(start.scales, float)
+
+        def top_drift(q, w):
+            with jax.enable_x64(True):
+                kin = Kinematics(jnp.asarray(q / np.linalg.norm(q)), jnp.asarray(w))
+                c = np.asarray(scene64.conserved(kin).values, float)
+            return {"energy_drift": float((c[0] - c0[0]) / scales[0]),
+                    "L_drift": float((c[1] - c0[1]) / scales[1]),
+                    "q_norm_drift": float(np.linalg.norm(q) - 1.0)}
 
     def error(out):
         q, w = np.asarray(out["q"], float), np.asarray(out["omega"], float)
@@ -279,6 +338,8 @@ def errors_against(ref: dict, case: hc.Case):
         if q.shape == (4,) and np.all(np.isfinite(q)):
             errs["q"] = harness.quaternion_error(q, ref["q"])
         extra = {}
+        if not case.torque_free and "q" in errs:
+            extra = top_drift(q, w)
         if case.torque_free:
             inertia = np.asarray(case.moments)
             w0 = np.asarray(case.omega0)
@@ -392,21 +453,30 @@ def method_table(case: hc.Case, size: str, quick: bool, cache: Compiled,
             lambda f=formulation, s=solver: jrigid_runner(case, size, f, s, cache), tols, "rtol")
     builders["jrigid leapfrog (chapter, midpoint)"] = (
         lambda: leapfrog_runner(case, size, cache), dts, "dt")
-    if case.torque_free:
-        builders["jrigid exact"] = (lambda: exact_runner(case, size, cache), [0.0], "—")
-    # over 10⁴ periods scipy DOP853 takes 13 s at rtol 1e-4 for an error of 0.4 and MuJoCo
-    # RK4 3 s at 10 steps a period for an error of 1: both are left out there.
-    scipy_methods = ("DOP853",) if quick or f32 else ("DOP853", "RK45", "LSODA")
-    if not long:
+    if not case.torque_free:
+        methods = SPLITTINGS_QUICK if quick else SPLITTINGS_LONG if long else SPLITTINGS
+        ks = STEPS_SPLIT[:4] if quick else STEPS_SPLIT_LONG if long else STEPS_SPLIT
+        for method in methods:
+            builders[f"jrigid splitting {method}"] = (
+                lambda m=method: splitting_runner(case, size, m, cache), [scale / k for k in ks],
+                "dt")
+    builders["jrigid exact"] = (lambda: exact_runner(case, size, cache), [0.0], "—")
+    # over 10⁴ periods of the free rotor scipy DOP853 takes 13 s at rtol 1e-4 for an error
+    # of 0.4 and MuJoCo RK4 3 s at 10 steps a period for an error of 1: both are left out
+    # there; on the top over 10⁴ nutation periods DOP853 and RK4 run at tight settings.
+    long_free = long and case.torque_free
+    scipy_methods = ("DOP853",) if quick or f32 or long else ("DOP853", "RK45", "LSODA")
+    if not long_free:
         for m in scipy_methods:
             builders[f"scipy {m}"] = (lambda m=m: (scipy_runner(case, size, m), None),
-                                      tols if quick or f32 else TOLS,
+                                      tols if quick or f32 or long else TOLS,
                                       "rtol")
-    if not (f32 or long):
-        for integrator in ("RK4",) if quick else ("RK4", "implicitfast"):
+    if not (f32 or long_free):
+        mujoco_dts = [scale / k for k in (10, 30, 100)] if long else dts
+        for integrator in ("RK4",) if quick or long else ("RK4", "implicitfast"):
             if mujoco_runner(case, size, integrator) is not None:
                 builders[f"MuJoCo {integrator}"] = (
-                    lambda i=integrator: (mujoco_runner(case, size, i), None), dts, "dt")
+                    lambda i=integrator: (mujoco_runner(case, size, i), None), mujoco_dts, "dt")
     table = {}
     for label, (build, params, kind) in builders.items():
         if only is None or only(label):
@@ -645,9 +715,11 @@ def case_markdown(res: dict) -> list[str]:
                  f"{d['error']:.1g}", f"{d['energy_drift']:.1e}", f"{d['L_drift']:.1e}",
                  "—" if d.get("q_norm_drift") is None else f"{d['q_norm_drift']:.1e}"]
                 for label, d in res["drift"].items()]
-        lines += ["Drift at the final time (tightest setting run; energy and |L| relative):", "",
+        momentum = "|L|" if case.get("tilt") is None else "L·ĝ"
+        lines += [f"Drift at the final time (tightest setting run; energy and {momentum} "
+                  "relative):", "",
                   harness.markdown_table(["method", "rtol or dt", "time", "error", "energy",
-                                          "|L|", "|q| − 1"], drow), ""]
+                                          momentum, "|q| − 1"], drow), ""]
     return lines
 
 
@@ -755,11 +827,11 @@ def run_case(case: hc.Case, size: str, *, quick: bool, cache: Compiled, log,
     res["summary"] = summarise(points, TARGETS_F32 if case.dtype == "float32" else TARGETS)
     if checks and case.eps is not None and case.dtype == "float64":
         res["check"] = flip_check(case)
-    if checks and case.spin_ratio is not None:
+    if checks and case.spin_ratio is not None and case.periods < 1e3:
         res["check"] = nutation_check(case)
     if checks and case.published:
         res["check"] = published_check(case)
-    if case.torque_free and case.periods >= 1e3:
+    if case.periods >= 1e3:
         res["drift"] = {}
         for label, pts in points.items():
             good = [p for p in pts if p["ok"] and p["extra"]]

@@ -37,9 +37,10 @@ store one state per step, forward mode and ``vmap`` work, and ``dt`` is traced (
 it does not recompile). Under ``vmap`` with a batched ``dt`` or ``ts`` every member steps
 as often as the member that needs most, its extra steps masked.
 
-Cost: one free flow (:func:`jrigid.exact.prepare` then :func:`jrigid.exact.evaluate`)
-takes about 13–19 µs on one CPU core, so a step of the 15-stage method about 0.25 ms; the
-README ("Splitting") compares it with adaptive Runge–Kutta.
+Cost: a step evaluates one closed-form free flow (:func:`jrigid.exact.prepare` then
+:func:`jrigid.exact.evaluate`, elliptic functions) per stage, several times what a stage of
+an adaptive Runge–Kutta step costs; the benchmarks page of the documentation ("Under
+torque: splitting against adaptive methods") says where that pays and where it does not.
 
 Derivatives inherit :mod:`jrigid.exact`'s one blind spot: where a free flow is exactly
 steady (ω along a principal axis, or a symmetric body with ω exactly in its equatorial

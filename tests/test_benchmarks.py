@@ -16,6 +16,7 @@ sys.path.insert(0, str(BENCH))
 
 import harness  # noqa: E402
 import speed_vs_error as sve  # noqa: E402
+import splitting as sp  # noqa: E402
 
 from jrigid import quaternion as quat  # noqa: E402
 from jrigid.formulations import QuaternionOmega, QuaternionOmegaState  # noqa: E402
@@ -205,3 +206,22 @@ def test_ensemble_throughput_report_and_figure(tmp_path):
     assert "— NOT met" in et.report(_throughput_result(rates))
     png = et.figure(_throughput_result(rates), tmp_path / "fig.png")
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_splitting_drift_report_on_a_short_run():
+    """The splitting benchmark's drift part: Strang's energy band does not grow, L·ĝ is kept
+    to rounding, scipy DOP853's band (its own equations) is measured on the same scene."""
+    res = sp.drift(2000)
+    assert res["t1"] == pytest.approx(20.0)
+    methods = res["methods"]
+    strang = methods["jrigid splitting strang, h = 0.01"]
+    assert strang["steps"] == 2000
+    assert 1e-9 < strang["energy_first_half"] < 1e-5  # O(h²), not rounding
+    assert strang["energy_second_half"] < 2 * strang["energy_first_half"]
+    assert strang["L_g"] < 1e-12
+    dop = methods[f"scipy DOP853, rtol {sp.DRIFT_RTOL:g}"]
+    assert 0 < dop["energy_second_half"] < 1e-6 and dop["L_g"] < 1e-5
+    text = sp.report({"orders": {}, "drift": res,
+                      "closed_form": {"seconds": {}, "max_difference_vs_dop853_100_periods": 0.0}},
+                     harness.machine_info())
+    assert "No drift" in text and "strang" in text

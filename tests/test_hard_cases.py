@@ -31,6 +31,7 @@ from test_exact import MpRigidBody  # noqa: E402
 from jrigid import exact  # noqa: E402
 from jrigid.integrate import SimulationError, simulate  # noqa: E402
 from jrigid.leapfrog import leapfrog  # noqa: E402
+from jrigid.state import Kinematics  # noqa: E402
 
 N = 1001  # output times of every sampled solve here (one compilation per scene kind)
 EPS = np.finfo(np.float64).eps
@@ -158,6 +159,18 @@ def test_fast_top_nutation_matches_analytic(key):
 
 
 # --------------------------------------------------------------------------- case 6
+
+
+def test_top_long_horizon_is_the_fast_top_over_ten_thousand_nutation_periods():
+    case, fast = hc.CASES["top_long_horizon"], hc.CASES["top_fast_20"]
+    period = hc.top_analytic(fast)["period"]
+    assert hc.horizon(case) == pytest.approx(1e4 * period, rel=1e-14)
+    assert hc.time_scale(case) == pytest.approx(hc.time_scale(fast), rel=1e-14)
+    ref = hc.reference(case, "small")  # 100 nutation periods: DOP853 cross-check runs
+    assert ref["t1"] == pytest.approx(100 * period, rel=1e-14)
+    assert ref["floor"] < 1e-10
+    assert hc.u_and_rate(ref["q"], ref["omega"])[0] == pytest.approx(
+        float(hc.top_u(case, ref["t1"])), abs=1e-11)
 
 
 def _drift_ratio(case, q, w):
@@ -326,6 +339,36 @@ def test_mujoco_conventions_match_jrigid():
     ref = hc.reference(top, "small")
     assert max(harness.omega_error(out["omega"], ref["omega"]),
                harness.quaternion_error(out["q"], ref["q"])) < 1e-9
+
+
+def test_splitting_runner_and_top_drift():
+    """On a top the report runs the splitting methods; its drifts are the scene's invariants."""
+    case = hc.CASES["top_fast_20"]
+    ref = hc.reference(case, "small")
+    error = wp.errors_against(ref, case)
+    run, seconds = wp.splitting_runner(case, "small", "kahan_li6", wp.Compiled(lambda *a: None))
+    assert seconds > 0
+    out = run(hc.time_scale(case) / 30)
+    errs, extra = error(out)
+    assert max(errs.values()) < 1e-8
+    assert abs(extra["energy_drift"]) < 1e-12 and abs(extra["L_drift"]) < 1e-12
+    # MuJoCo's RK4 at a coarse step drifts; the drift is E(t1)/E0 − 1 measured independently
+    out = wp.mujoco_runner(case, "small", "RK4")(hc.time_scale(case) / 10)
+    _, extra = error(out)
+    prob = hc.problem(case, "small")
+    scene = prob.scene()
+    state = prob.state()
+    q = jnp.asarray(out["q"] / np.linalg.norm(out["q"]))
+
+    def energy(q, w):
+        w = jnp.asarray(w)
+        return float(scene.kinetic_energy(w) + scene.potential_energy(Kinematics(q, w)))
+
+    e0 = energy(state.q, state.omega)
+    scale = float(scene.conserved(Kinematics(state.q, state.omega)).scales[0])
+    assert extra["energy_drift"] == pytest.approx((energy(q, out["omega"]) - e0) / scale,
+                                                  rel=1e-6)
+    assert abs(extra["energy_drift"]) > 1e-9
 
 
 def test_work_precision_machinery_on_a_tiny_case(tmp_path):

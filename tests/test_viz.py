@@ -335,6 +335,11 @@ def test_plot_writes_an_image(name, tmp_path):
     fig = PLOTS[name](data)
     path = viz.save(fig, tmp_path / f"{name}.png")
     _assert_image(path)
+    for ax in fig.axes:  # every time axis says its unit
+        label = ax.get_xlabel()
+        assert label in ("", "t [s]") or "[" in label, (name, label)
+    if name.startswith("omega"):
+        assert fig.axes[0].get_ylabel() == "ω [rad/s]"
 
 
 def test_plot_estimates_shows_standardised_errors(tmp_path):

@@ -12,6 +12,9 @@ Every function takes ``data`` (a trajectory-like object or a mapping of arrays, 
 * :func:`plot_precession_nutation` — precession, nutation and spin of a body axis about
   ``L`` (:mod:`jrigid.viz.angles`), with the measured mean rates in the legend.
 * :func:`plot_overview` — all of the above on one page.
+
+Axes are labelled in SI units (time in s, ω in rad/s), the units of jrigid's defaults
+(``Gravity`` is 9.81 m/s²); a scene built in other consistent units reads them in those.
 """
 
 from __future__ import annotations
@@ -51,7 +54,7 @@ def _axes(ax, figsize=(6.0, 3.2)):
 
 
 def _finish(ax, ylabel: str, title: str = "") -> None:
-    ax.set_xlabel("t")
+    ax.set_xlabel("t [s]")
     short = len(ylabel) <= 2  # a lone symbol reads better upright (a turned ω looks like 3)
     ax.set_ylabel(ylabel, rotation=0 if short else 90, labelpad=12 if short else 4)
     if title:
@@ -82,7 +85,7 @@ def plot_omega(data: Any, *, frame: str = "body", ax=None, moments=None) -> Figu
     for k in range(3):
         ax.plot(s.ts, w[:, k], color=COMPONENT_COLORS[k], label=labels[k], lw=1.2)
     ax.legend(loc="best", fontsize=8, ncols=3, framealpha=0.8)
-    _finish(ax, "ω", f"angular velocity ({frame} frame)")
+    _finish(ax, "ω [rad/s]", f"angular velocity ({frame} frame)")
     return fig
 
 
