@@ -112,7 +112,7 @@ def main(
     ax = fig.add_subplot(1, 1, 1)
     for k, r in enumerate(runs):
         ax.semilogy(np.asarray(ts), np.maximum(r["dev"], 1e-3), label=f"axis {AXIS_NAMES[k]}")
-    ax.set_xlabel("t")
+    ax.set_xlabel("t (s)")
     ax.set_ylabel("angle of ω from its axis (°)")
     ax.legend(fontsize=7)
     rep.figure("deviation", fig, caption="angle between ω and the starting axis", dpi=70)

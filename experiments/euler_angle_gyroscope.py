@@ -132,7 +132,7 @@ def main(
     ax.plot(t, np.degrees(th_q), lw=1.5, label="quaternions")
     ax.plot(t, np.degrees(th_e), "--", lw=1, label="Euler angles")
     ax.plot(t, np.degrees(th_fast), ":", color="k", lw=1, label="fast top")
-    ax.set_xlabel("t")
+    ax.set_xlabel("t (s)")
     ax.set_ylabel("θ (°)")
     ax.legend(fontsize=7)
     ax = fig.add_subplot(1, 2, 2)
@@ -140,7 +140,7 @@ def main(
     th_fe = np.degrees(np.arccos(np.clip(np.asarray(fe.axes[:, 2, 2]), -1.0, 1.0)))
     ax.plot(np.asarray(ts), th_fe, "--", lw=1, label="Euler angles (stops)")
     ax.axvline(float(fe.t_stop), color="#d62728", lw=0.8)
-    ax.set_xlabel("t")
+    ax.set_xlabel("t (s)")
     ax.set_ylabel("θ (°)")
     ax.legend(fontsize=7)
     rep.figure("theta", fig, caption="left: nutation, three ways; right: through the vertical "

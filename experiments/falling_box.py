@@ -157,8 +157,8 @@ def draw_2d(ax, run, size, k=9, t_max=4.0):
         ax.fill(c[:, 0], c[:, 2], alpha=0.35, color=f"C{j % 10}", ec="k", lw=0.6)
     ax.axhline(0.0, color="k", lw=1)
     ax.set_aspect("equal")
-    ax.set_xlabel("x")
-    ax.set_ylabel("z")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("z (m)")
 
 
 def _floor_mesh(extent):
@@ -194,7 +194,7 @@ def draw_3d(ax, run, size, k=6, camera=None, t_max=4.0):
     render.setup_axes(ax, extent)
     ax.set_ylim(-0.3 * extent, max(float(x[:, 2].max()) + max(size), 0.4 * extent))
     for j in range(k):
-        ax.text(x[j, 0], -0.28 * extent, f"t={ts[idx[j]]:.2g}", fontsize=7, ha="center")
+        ax.text(x[j, 0], -0.28 * extent, f"t = {ts[idx[j]]:.2g} s", fontsize=7, ha="center")
 
 
 def plot_energies(ax, run, parts, title):
@@ -206,7 +206,7 @@ def plot_energies(ax, run, parts, title):
     for t in run.bounces["t"]:
         ax.axvline(t, color="#bbbbbb", lw=0.4, zorder=0)
     ax.set_title(title, fontsize=9)
-    ax.set_xlabel("t")
+    ax.set_xlabel("t (s)")
     ax.set_xlim(0, min(float(ts[-1]), 10.0))
 
 

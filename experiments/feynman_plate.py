@@ -198,7 +198,7 @@ def main(
     for v, mark in (("midpoint", "o-"), ("chapter", "s-")):
         errs = [lf[v, d]["q_error"] for d in dts]
         ax.loglog(steps, errs, mark, label=f"{v} (order {order[v]:.2f})")
-    ax.set_xlabel("dt")
+    ax.set_xlabel("dt (s)")
     ax.set_ylabel("max orientation error (rad)")
     ax.legend(fontsize=7)
     rep.figure("ratio_and_leapfrog", fig, caption="wobble/spin; leapfrog error", dpi=70)

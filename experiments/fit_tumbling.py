@@ -62,7 +62,7 @@ def _figures(rep, record, params, names, true, est, sig, sweep) -> None:
     for k in range(3):
         ax.plot(ts, data[:, k], ".", color=f"C{k}", ms=3, label=f"gyro ω{k + 1}")
         ax.plot(np.asarray(problem.ts), np.asarray(pred.omega[:, k]), "-", color=f"C{k}", lw=1)
-    ax.set_xlabel("t")
+    ax.set_xlabel("t (s)")
     ax.set_ylabel("ω (rad/s, body)")
     ax.set_title("gyroscope record (dots) and the fit (lines)", fontsize=9)
     ax.legend(fontsize=7)
@@ -79,7 +79,7 @@ def _figures(rep, record, params, names, true, est, sig, sweep) -> None:
                   label=f"σ_est, noise {s:g}")  # fmt: skip
         ax.loglog(d, [x["max_moment_error"] for x in rows], "o", color=f"C{i}",
                   label=f"|error|, noise {s:g}")  # fmt: skip
-    ax.set_xlabel("record length")
+    ax.set_xlabel("record length (s)")
     ax.set_ylabel("moment ratios: max |error|, max σ")
     ax.set_title("error shrinks with record length", fontsize=9)
     ax.legend(fontsize=7)

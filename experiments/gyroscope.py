@@ -146,7 +146,7 @@ def main(
         ax = fig.add_subplot(1, 3, k + 1)
         ax.plot(np.asarray(tr.ts), 90 - np.degrees(th_), lw=0.8)
         ax.set_title(name, fontsize=9)
-        ax.set_xlabel("t")
+        ax.set_xlabel("t (s)")
         ax.set_ylim(87.5 - theta_deg, 90.5 - theta_deg)  # same scale: steady runs are flat
         if k == 0:
             ax.set_ylabel("elevation of the axle (°)")

@@ -211,7 +211,7 @@ def main(
         ax.plot(*path[-1, :2], "o", color="C0")
         ax.set_aspect("equal")
         ax.set_title(title, fontsize=10)
-        ax.set_xlabel("x")
+        ax.set_xlabel("x (m)")
     ax1.plot(*run["r0"][:2], "ks", label="thrower at t = 0")
     q_end = platform_orientation(omega, np.array([T]))[0]
     thrower_end = np.asarray(quat.rotate(q_end, jnp.asarray(run["r0"])))
@@ -220,7 +220,7 @@ def main(
     straight = run["r0"] + run["v_rel"] * ts[:, None]
     ax2.plot(straight[:, 0], straight[:, 1], "k--", lw=0.8, label="aimed (no rotation)")
     ax2.plot(exact[::4, 0], exact[::4, 1], ".", color="C3", ms=3, label="closed form")
-    ax1.set_ylabel("y")
+    ax1.set_ylabel("y (m)")
     for ax in (ax1, ax2):
         ax.legend(fontsize=7, loc="lower left")
     rep.figure("paths", fig, caption="top view of the throw in both frames", dpi=80)

@@ -114,14 +114,16 @@ class Report:
             name: file stem, e.g. ``"omega"``; an explicit ``.png``/``.svg``/``.pdf`` is kept.
             fig: anything with ``savefig(path, dpi=...)``.
             caption: text under the image in the summary.
-            dpi: resolution.
+            dpi: resolution, raised where needed so that a raster image is at least
+                ``jrigid.viz.MIN_WIDTH_PX`` pixels wide (:func:`jrigid.viz.save`).
             show: show the image in the summary (default True).
 
         Returns:
             the written path.
         """
-        path = self.out_dir / (name if Path(name).suffix else f"{name}.png")
-        fig.savefig(path, dpi=dpi)
+        from jrigid.viz import save  # matplotlib is loaded already: fig is a figure
+
+        path = save(fig, self.out_dir / (name if Path(name).suffix else f"{name}.png"), dpi)
         if show:
             self.image(path, caption)
         return path

@@ -342,6 +342,23 @@ def test_plot_writes_an_image(name, tmp_path):
         assert fig.axes[0].get_ylabel() == "ω [rad/s]"
 
 
+def test_saved_images_are_readable_at_page_width(tmp_path):
+    """Raster images are at least MIN_WIDTH_PX wide whatever dpi is asked; vector kept."""
+    from jrigid.report import Report
+
+    fig = viz.plot_omega(_steady(), ax=None)  # 6 in wide at 100 dpi: 600 px as drawn
+    for path, dpi in ((tmp_path / "low.png", 60), (tmp_path / "default.png", None)):
+        viz.save(fig, path, dpi=dpi)
+        assert Image.open(path).size[0] >= viz.MIN_WIDTH_PX
+    viz.save(fig, tmp_path / "high.png", dpi=300)  # a higher dpi is kept
+    assert Image.open(tmp_path / "high.png").size[0] == 1800
+    viz.save(fig, tmp_path / "as_asked.png", dpi=50, min_width=0)
+    assert Image.open(tmp_path / "as_asked.png").size[0] == 300
+    assert viz.save(fig, tmp_path / "v.svg", dpi=60).read_text().lstrip().startswith("<?xml")
+    path = Report(tmp_path / "report").figure("omega", fig, dpi=60)
+    assert Image.open(path).size[0] >= viz.MIN_WIDTH_PX
+
+
 def test_plot_estimates_shows_standardised_errors(tmp_path):
     fig = viz.plot_estimates(["a", "b"], [1.1, 2.0], [1.0, 2.2], [0.05, 0.1])
     points = fig.axes[0].containers[0].lines[0].get_ydata()  # the error-bar markers

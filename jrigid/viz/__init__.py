@@ -26,7 +26,7 @@ Example::
 """
 
 from . import angles, animation, data, plots, render, shapes, views
-from ._figure import new_figure, save
+from ._figure import MIN_WIDTH_PX, new_figure, save
 from .angles import euler_about, fit_rate
 from .animation import (
     AliasingWarning,
@@ -53,6 +53,7 @@ __all__ = [
     "AliasingWarning",
     "Camera",
     "DualView",
+    "MIN_WIDTH_PX",
     "Mesh",
     "Series",
     "angles",

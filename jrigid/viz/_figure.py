@@ -7,13 +7,17 @@ renders itself as PNG in a notebook cell).
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-__all__ = ["new_figure", "save"]
+__all__ = ["MIN_WIDTH_PX", "new_figure", "save"]
+
+MIN_WIDTH_PX = 1000  # raster images at least this wide: readable at page width
+RASTER = (".png", ".jpg", ".jpeg", ".webp", ".tif", ".tiff")
 
 
 def new_figure(figsize=(6.4, 4.8), dpi: int = 100, **kwargs) -> Figure:
@@ -24,9 +28,22 @@ def new_figure(figsize=(6.4, 4.8), dpi: int = 100, **kwargs) -> Figure:
     return fig
 
 
-def save(fig: Figure, path: str | os.PathLike, dpi: int | None = None) -> Path:
-    """Save ``fig`` to ``path`` (format from the extension), creating folders; return the path."""
+def save(fig, path: str | os.PathLike, dpi: int | None = None, *,
+         min_width: int = MIN_WIDTH_PX) -> Path:
+    """Save ``fig`` to ``path`` (format from the extension), creating folders; return the path.
+
+    Args:
+        fig: a ``Figure`` (or anything with ``savefig(path, dpi=...)``).
+        path: output file; its extension picks the format.
+        dpi: resolution; default the figure's own. A raster image (PNG, JPEG, …) is raised
+            to at least ``min_width`` pixels wide, so that it stays readable at page width.
+        min_width: smallest raster width in pixels (``0``: keep ``dpi`` as given).
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=dpi if dpi is not None else fig.dpi)
+    dpi = getattr(fig, "dpi", 100) if dpi is None else dpi
+    width = getattr(fig, "get_figwidth", None)
+    if path.suffix.lower() in RASTER and width is not None and min_width > 0:
+        dpi = max(dpi, math.ceil(min_width / width()))
+    fig.savefig(path, dpi=dpi)
     return path
