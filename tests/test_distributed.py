@@ -1,5 +1,6 @@
-"""jrigid.ensemble on real executors: a Dask ``LocalCluster`` of two worker processes,
-and the ``jax.distributed`` route with two processes.
+"""jrigid.ensemble on real executors: a Dask ``LocalCluster`` of two worker processes, a
+standard-library ``ProcessPoolExecutor``, and the ``jax.distributed`` route with two
+processes.
 
 Every run is compared bit for bit with one straight ``jax.jit(jax.vmap(fn))`` in this
 process (and ``simulate_many`` with its own in-process run): a worker computes the same
@@ -169,6 +170,27 @@ def test_killed_driver_resumes_and_second_driver_is_refused(tmp_path, client):
     assert_identical(out, straight(rotor, inputs))
     for name, mtime in finished.items():  # finished chunks were loaded, not rewritten
         assert (out_dir / name).stat().st_mtime_ns == mtime
+
+
+def test_process_pool_is_bit_identical_and_resumes(tmp_path):
+    """A standard-library ``ProcessPoolExecutor`` (spawned workers) as the executor."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    inputs = rotor_inputs(12)
+    info: dict = {}
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=2, mp_context=ctx) as pool:
+        out = ensemble.run(rotor, inputs, chunk_size=4, out_dir=tmp_path, progress=False,
+                           info=info, executor=pool)
+    assert_identical(out, straight(rotor, inputs))
+    assert info["chunks_computed"] == 3
+    assert str(os.getpid()) not in {w.split(":")[-1] for w in info["workers"]}
+    again: dict = {}
+    resumed = ensemble.run(rotor, inputs, chunk_size=4, out_dir=tmp_path, progress=False,
+                           info=again)
+    assert again["chunks_loaded"] == 3 and again["chunks_computed"] == 0
+    assert_identical(resumed, out)
 
 
 def test_chunk_file_copied_to_another_index_is_not_loaded(tmp_path):
