@@ -21,6 +21,7 @@ matplotlib until something needs them (``jrigid list`` stays instant).
 from __future__ import annotations
 
 import importlib
+import pkgutil
 from typing import TYPE_CHECKING
 
 __version__ = "0.1.0"
@@ -48,25 +49,10 @@ _EXPORTS = {
     "Floor": "jrigid.contact",
     "simulate_bounces": "jrigid.contact",
 }
-_SUBMODULES = (
-    "affine",
-    "body",
-    "ensemble",
-    "exact",
-    "fit",
-    "formulations",
-    "inertia",
-    "initial",
-    "integrate",
-    "leapfrog",
-    "quaternion",
-    "scene",
-    "special",
-    "splitting",
-    "state",
-    "trajectory",
-    "viz",
-)
+# Every public submodule (the package folder's modules and subpackages without a leading
+# underscore), read from the folder without importing any of them.
+_SUBMODULES = tuple(sorted(m.name for m in pkgutil.iter_modules(__path__)
+                           if not m.name.startswith("_")))
 
 __all__ = sorted([*_EXPORTS, *_SUBMODULES])
 
@@ -90,6 +76,10 @@ if TYPE_CHECKING:
     from jrigid import (  # noqa: F401
         affine,
         body,
+        cli,
+        closed_form,
+        contact,
+        demo,
         ensemble,
         exact,
         fit,
@@ -97,11 +87,19 @@ if TYPE_CHECKING:
         inertia,
         initial,
         integrate,
+        invariants,
+        lagrange_top,
         leapfrog,
+        linalg,
         quaternion,
+        registry,
+        report,
         scene,
+        solve,
+        solvers,
         special,
         splitting,
+        stability,
         state,
         trajectory,
         viz,
