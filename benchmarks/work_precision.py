@@ -178,8 +178,9 @@ def jrigid_runner(case, size, formulation, solver_name, cache: Compiled):
     return run, seconds
 
 
-def leapfrog_runner(case, size, cache: Compiled):
-    """``(run(dt), compile_seconds)`` for the chapter's leapfrog (midpoint variant)."""
+def _stepped_runner(case, size, cache: Compiled, name: str, integrate):
+    """``(run(dt), compile_seconds)`` for ``integrate(scene, state, ts, dt) -> Trajectory``,
+    a fixed-step method compiled once per (scene kind, dtype, ``name``)."""
     prob = hc.problem(case, size)
     with _x64(case):
         scene, state = prob.scene(), prob.state()
@@ -188,44 +189,34 @@ def leapfrog_runner(case, size, cache: Compiled):
 
     def build():
         def solve(scene, state, ts, dt):
-            return _final(leapfrog(scene, state, ts, dt=dt), dtype)
+            return _final(integrate(scene, state, ts, dt), dtype)
 
         with _x64(case):
             return harness.compile_jax(jax.jit(solve), scene, state, ts, jnp.asarray(0.1, dtype))
 
-    fn, seconds = cache.get((_kind(case), case.dtype, "leapfrog"), build)
-
-    def run(dt):
-        with _x64(case):
-            out = fn(scene, state, ts, jnp.asarray(dt, dtype))
-            return dict(out, steps=out["steps"])
-
-    return run, seconds
-
-
-def splitting_runner(case, size, method, cache: Compiled):
-    """``(run(dt), compile_seconds)`` for ``simulate(solver=Splitting(method, dt=dt))``."""
-    prob = hc.problem(case, size)
-    with _x64(case):
-        scene, state = prob.scene(), prob.state()
-        dtype = scene.body.moments.dtype
-        ts = jnp.array([0.0, prob.t1], dtype=dtype)
-
-    def build():
-        def solve(scene, state, ts, dt):
-            solver = Splitting(method, dt=dt, max_steps=SPLIT_MAX_STEPS)
-            return _final(simulate(scene, state, ts, solver=solver, throw=False), dtype)
-
-        with _x64(case):
-            return harness.compile_jax(jax.jit(solve), scene, state, ts, jnp.asarray(0.1, dtype))
-
-    fn, seconds = cache.get((_kind(case), case.dtype, f"splitting {method}"), build)
+    fn, seconds = cache.get((_kind(case), case.dtype, name), build)
 
     def run(dt):
         with _x64(case):
             return fn(scene, state, ts, jnp.asarray(dt, dtype))
 
     return run, seconds
+
+
+def leapfrog_runner(case, size, cache: Compiled):
+    """``(run(dt), compile_seconds)`` for the chapter's leapfrog (midpoint variant)."""
+    return _stepped_runner(case, size, cache, "leapfrog",
+                           lambda scene, state, ts, dt: leapfrog(scene, state, ts, dt=dt))
+
+
+def splitting_runner(case, size, method, cache: Compiled):
+    """``(run(dt), compile_seconds)`` for ``simulate(solver=Splitting(method, dt=dt))``."""
+
+    def integrate(scene, state, ts, dt):
+        solver = Splitting(method, dt=dt, max_steps=SPLIT_MAX_STEPS)
+        return simulate(scene, state, ts, solver=solver, throw=False)
+
+    return _stepped_runner(case, size, cache, f"splitting {method}", integrate)
 
 
 def exact_runner(case, size, cache: Compiled):
