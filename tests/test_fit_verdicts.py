@@ -1,7 +1,6 @@
 """jrigid.fit verdicts: a fit that failed says so, and why; undetermined directions get
-σ = inf; bad starts and bad σ raise ValueError; the package example runs."""
+σ = inf; bad starts and bad σ raise ValueError."""
 
-import doctest
 import math
 import warnings
 
@@ -12,8 +11,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-import jrigid.fit
-from jrigid import fit, initial
+from jrigid import exact, fit, initial
 from jrigid.body import RigidBody
 from jrigid.scene import Scene
 
@@ -74,43 +72,32 @@ TRUE_MOMENTS = jnp.array([1.0, 2.0, 2.5]) / 5.5
 SIGMA = 0.02
 
 
-def tumbling(example):
-    """The example's gyroscope record of a tumbling body (same compiled model)."""
-    names = example[1]
-    assert np.allclose(names["truth"], TRUE_MOMENTS)
-    return names["problem"], np.asarray(names["measured"])
-
-
 def triangle_gap(m):
     m = np.asarray(m)
     return min(m[0] + m[1] - m[2], m[0] + m[2] - m[1], m[1] + m[2] - m[0]) / m.sum()
 
 
-# --------------------------------------------------------------------------- the package example
+def _build(theta):
+    body = RigidBody(fit.moment_ratios(theta["shape"]))
+    return Scene(body), initial.from_omega(None, theta["omega0"])
 
 
 @pytest.fixture(scope="module")
 def example():
-    """Run the example of jrigid.fit's docstring; return its failures and its names."""
-    test = doctest.DocTestFinder().find(jrigid.fit, "jrigid.fit")[0]
-    runner = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS, verbose=False)
-    out = runner.run(test, clear_globs=False)
-    return out, test.globs
-
-
-def test_package_docstring_example_runs(example):
-    """The example: a sensible start, success, χ²/dof ≈ 1, the truth within 3σ."""
-    out, names = example
-    assert out.attempted >= 10
-    assert out.failed == 0
-    assert names["result"].success
+    """The gyroscope record of a tumbling body of jrigid.fit's docstring example (which
+    itself runs in tests/test_doctests.py): the problem and the measured ω."""
+    ts = jnp.linspace(0.0, 8.0, 41)
+    _, omega = exact.solve(TRUE_MOMENTS, IDENTITY, jnp.array([0.3, 2.0, 0.2]), ts)
+    measured = omega + SIGMA * np.random.default_rng(0).standard_normal(omega.shape)
+    problem = fit.Problem(fit.Exact(_build), fit.Gyroscope(ts, measured, sigma=SIGMA))
+    return problem, np.asarray(measured)
 
 
 # --------------------------------------------------------------------------- verdicts
 
 
 def test_good_fit_succeeds_with_chi2_dof_near_one(example):
-    problem, data = tumbling(example)
+    problem, data = example
     start = {"shape": fit.moment_ratios_raw(jnp.array([1.0, 1.5, 2.0])), "omega0": data[0]}
     with warnings.catch_warnings():
         warnings.simplefilter("error", fit.FitWarning)
@@ -140,7 +127,7 @@ def test_fit_from_a_sphere_moves_the_shape_or_says_it_failed(example):
     """From ``moment_ratios(zeros(2))`` (a sphere) the exact model's derivative with respect
     to the shape is not zero (it used to be, so L-BFGS stopped at once, "converged", at
     χ²/dof ~ 1e4). The shape moves; the fit ends at the truth or is flagged."""
-    problem, data = tumbling(example)
+    problem, data = example
     start = {"shape": jnp.zeros(2), "omega0": jnp.asarray(data[0])}
     grad = jax.grad(lambda p: problem.loss(p))(start)
     assert float(jnp.max(jnp.abs(grad["shape"]))) > 1.0
@@ -353,7 +340,7 @@ def test_lm_from_far_starts_never_returns_a_degenerate_body_as_success(example):
     """From far starts the loss of an 8 s tumbling record often leads to the edge of the
     physical region (a rod or a flat body, χ²/dof ≈ 650–3600): every such fit is flagged,
     and every success is the truth. Fitting a short record first (horizons) avoids them."""
-    problem, data = tumbling(example)
+    problem, data = example
     plain = staged = 0
     for start in far_starts(data):
         for horizons in (None, (0.25, 0.5)):
@@ -374,7 +361,7 @@ def test_lm_from_far_starts_never_returns_a_degenerate_body_as_success(example):
 
 
 def test_horizons_restrict_the_record(example):
-    problem, data = tumbling(example)
+    problem, data = example
     short = problem.until(2.0)
     assert short.active_size == 3 * 11 and problem.active_size == problem.size == 3 * 41
     theta = {"shape": fit.moment_ratios_raw(jnp.array([1.0, 1.5, 2.0])), "omega0": data[0]}
@@ -409,7 +396,7 @@ def test_bad_start_raises_value_error(params0, match):
 
 
 def test_nan_start_of_a_body_raises_value_error_before_building_it(example):
-    problem, data = tumbling(example)
+    problem, data = example
     with pytest.raises(ValueError, match=r"params0\['shape'\] has NaN"):
         fit.fit(problem, {"shape": jnp.array([np.nan, 0.0]), "omega0": data[0]}, method="lm")
     with pytest.raises(ValueError, match=r"raw must have shape \(\.\.\., 2\), got \(3,\)"):
