@@ -21,18 +21,16 @@ Per trajectory
     a flip (body component of ω, projection of the axis on ``L``) coincide, and the first
     needs no orientation.
     :func:`ftle_exact` / :func:`ftle_simulate`: the finite-time Lyapunov exponent
-    ``log(σ_max(∂ω(T)/∂ω(0)))/T`` by forward-mode autodiff (``jax.jacfwd``) through the
-    closed-form motion (:mod:`jrigid.exact`) or through :func:`jrigid.simulate` with
-    ``diffrax.ForwardMode``.
+    ``log(σ_max(∂ω(T)/∂ω(0)))/T`` by forward-mode autodiff, from :mod:`jrigid.ftle`
+    (re-exported here).
 Closed form
     :func:`encircled_axis` (the axis the polhode goes round), :func:`flips_expected`
     (the nearest axis is not the encircled one: it must turn over), :func:`polhode` (the
     intersection of the energy ellipsoid and the momentum sphere), :func:`flip_time_asymptotic`
     (half-period between flips near the separatrix).
 Lockstep efficiency
-    :func:`lockstep_efficiency`, :func:`difficulty_order`: under ``vmap`` an adaptive loop
-    runs until its slowest member is done; grouping members of similar difficulty before
-    chunking recovers the wasted steps (``benchmarks/lockstep.py``).
+    :func:`lockstep_efficiency` and :func:`difficulty_order` live in
+    :mod:`jrigid.ensemble.schedule` and are re-exported here.
 
 Flip time near the separatrix (derived in :func:`flip_time_asymptotic`): spun at ``|ω|``
 about the middle axis tilted by ``ε`` toward axis 3 (moments ``I1 < I2 < I3``), the time
@@ -54,9 +52,11 @@ import jax
 import jax.numpy as jnp
 from jax.typing import ArrayLike
 
-from jrigid import exact, initial
+from jrigid import initial
 from jrigid import quaternion as quat
 from jrigid.body import RigidBody
+from jrigid.ensemble.schedule import difficulty_order, lockstep_efficiency
+from jrigid.ftle import ftle_exact, ftle_simulate
 from jrigid.integrate import simulate
 from jrigid.scene import Scene
 
@@ -276,95 +276,6 @@ def trajectory_summary(ts: ArrayLike, q: ArrayLike, omega: ArrayLike) -> dict[st
     return dict(axis=k, max_axis_angle=jnp.max(angle), flips=count, first_flip=first)
 
 
-def _log_sigma_max(jac: jax.Array) -> jax.Array:
-    return jnp.log(jnp.linalg.svd(jac, compute_uv=False)[0])
-
-
-def ftle_exact(moments: ArrayLike, omega0: ArrayLike, t: ArrayLike) -> jax.Array:
-    """Finite-time Lyapunov exponent of Euler's equations from the closed-form motion.
-
-    ``FTLE = log σ_max(J)/t`` with ``J = ∂ω(t)/∂ω(0)`` (``3×3``, dimensionless) by
-    ``jax.jacfwd`` through :func:`jrigid.exact.solve`. In the stable regions ``J`` grows
-    at most linearly (the period depends on the amplitude), so the FTLE decays like
-    ``log(t)/t``; near the separatrix it is close to the saddle's rate
-    ``λ = |ω| √((I3−I2)(I2−I1)/(I1 I3))`` for times up to the first flip.
-    Only ω is used, not the orientation: the orientation's phase grows linearly in ``t``
-    for every direction and would add the same ``log(t)/t`` floor everywhere.
-
-    Args:
-        moments: ``(3,)`` principal moments.
-        omega0: ``(3,)`` initial body angular velocity (not exactly on a principal axis,
-            where the closed form's derivative is that of the steady spin).
-        t: ``()`` horizon ``> 0``.
-
-    Returns:
-        ``()`` FTLE in 1/time.
-    """
-    moments, omega0 = jnp.asarray(moments), jnp.asarray(omega0)
-    t = jnp.asarray(t, dtype=omega0.dtype)
-    q0 = quat.identity(dtype=omega0.dtype)
-    # Tie the moments to the traced ω0, so exact.prepare sees a tracer (not a concrete
-    # array captured by jit) and skips its concrete-value check.
-    moments = moments * jnp.ones_like(omega0)
-
-    def final(w):
-        return exact.solve(moments, q0, w, t[None])[1][0]
-
-    return _log_sigma_max(jax.jacfwd(final)(omega0)) / t
-
-
-def ftle_simulate(
-    moments: ArrayLike,
-    omega0: ArrayLike,
-    t: ArrayLike,
-    *,
-    rtol: ArrayLike = 1e-10,
-    atol: ArrayLike = 1e-12,
-    solver: diffrax.AbstractSolver | None = None,
-    max_steps: int = 100_000,
-    formulation: str = "body_omega",
-) -> jax.Array:
-    """:func:`ftle_exact` computed by forward-mode autodiff through :func:`jrigid.simulate`.
-
-    ``jax.jacfwd`` of ``ω(t)`` with respect to ``ω(0)`` through the adaptive solve with
-    ``adjoint=diffrax.ForwardMode()`` (three tangent solves alongside the primal).
-
-    Args:
-        moments: ``(3,)`` principal moments.
-        omega0: ``(3,)`` initial body angular velocity.
-        t: ``()`` horizon ``> 0``.
-        rtol, atol: tolerances of the solve.
-        solver: diffrax solver (default ``Tsit5``).
-        max_steps: step budget.
-        formulation: static, :func:`jrigid.simulate`'s formulation; the default
-            ``"body_omega"`` integrates Euler's equations alone (ω needs no orientation).
-
-    Returns:
-        ``()`` FTLE in 1/time.
-    """
-    moments, omega0 = jnp.asarray(moments), jnp.asarray(omega0)
-    t = jnp.asarray(t, dtype=omega0.dtype)
-    scene = Scene(RigidBody(moments))
-    ts = jnp.stack([jnp.zeros_like(t), t])
-
-    def final(w):
-        traj = simulate(
-            scene,
-            initial.from_omega(None, w),
-            ts,
-            rtol=rtol,
-            atol=atol,
-            solver=solver,
-            adjoint=diffrax.ForwardMode(),
-            max_steps=max_steps,
-            formulation=formulation,
-            throw=False,
-        )
-        return traj.omega[-1]
-
-    return _log_sigma_max(jax.jacfwd(final)(omega0)) / t
-
-
 def map_member(
     moments: ArrayLike,
     omega0: ArrayLike,
@@ -395,6 +306,22 @@ def map_member(
         dict of scalars: the keys of :func:`trajectory_summary` plus ``ftle``,
         ``flips_expected``, ``num_steps`` (accepted + rejected) and ``result``
         (:class:`jrigid.integrate.Result` code).
+
+    Example: a map of two directions, near the intermediate and the largest axis of a
+    body with moments 1, 2, 3 (for thousands, run it with :func:`jrigid.ensemble.run`)::
+
+        >>> import jax, jax.numpy as jnp
+        >>> jax.config.update("jax_enable_x64", True)
+        >>> from jrigid import stability
+        >>> moments = jnp.array([1.0, 2.0, 3.0])
+        >>> omega0 = stability.omega_at_energy(
+        ...     jnp.array([[0.05, 1.0, 0.05], [0.05, 0.05, 1.0]]), moments, 1.0)
+        >>> ts = jnp.linspace(0.0, 30.0, 61)
+        >>> out = jax.vmap(lambda w: stability.map_member(moments, w, ts, 10.0))(omega0)
+        >>> out["axis"].tolist(), out["flips"].tolist(), out["flips_expected"].tolist()
+        ([1, 2], [2, 0], [True, False])
+        >>> bool(out["ftle"][0] > 5 * out["ftle"][1])
+        True
     """
     moments, omega0 = jnp.asarray(moments), jnp.asarray(omega0)
     traj = simulate(
@@ -516,67 +443,6 @@ def flip_time_asymptotic(
     Returns:
         ``(T, λ, C)``: ``T`` of the shape of ``eps``, ``λ`` and ``C`` scalars.
     """
-    if toward not in ("largest", "smallest"):
-        raise ValueError(f"toward must be 'largest' or 'smallest', got {toward!r}")
-    s = jnp.sort(jnp.asarray(moments))
-    i1, i2, i3 = s[0], s[1], s[2]
-    lam = jnp.asarray(speed) * jnp.sqrt((i3 - i2) * (i2 - i1) / (i1 * i3))
-    if toward == "largest":
-        const = 4.0 * jnp.sqrt(i2 * (i2 - i1) / (i3 * (i3 - i1)))
-    else:
-        const = 4.0 * jnp.sqrt(i2 * (i3 - i2) / (i1 * (i3 - i1)))
-    return 2.0 / lam * jnp.log(const / jnp.asarray(eps)), lam, const
+    from jrigid.theory import flip_interval_asymptotic
 
-
-# --------------------------------------------------------------------------- lockstep
-
-
-def lockstep_efficiency(
-    steps: ArrayLike, chunk_size: int, order: ArrayLike | None = None
-) -> jax.Array:
-    """Useful fraction of the steps a chunked ``vmap`` of adaptive solves executes.
-
-    Under ``vmap`` diffrax's loop runs until the slowest member of a chunk is done, so a
-    chunk of ``n`` members needing ``s_i`` steps executes ``n · max s_i`` member-steps.
-    Efficiency ``= Σ s_i / Σ_chunks (n_chunk · max_chunk s_i)`` (a padded last chunk's
-    padding is not counted).
-
-    Args:
-        steps: ``(N,)`` steps each member needs (``Trajectory.stats["num_steps"]``).
-        chunk_size: static members per chunk.
-        order: ``(N,)`` permutation applied before chunking (e.g. :func:`difficulty_order`);
-            default the given order.
-
-    Returns:
-        ``()`` efficiency in ``(0, 1]``.
-    """
-    s = jnp.asarray(steps, dtype=jnp.result_type(float))
-    if order is not None:
-        s = s[jnp.asarray(order)]
-    n = s.shape[0]
-    n_chunks = -(-n // chunk_size)
-    pad = n_chunks * chunk_size - n
-    padded = jnp.concatenate([s, jnp.full((pad,), -jnp.inf, s.dtype)]).reshape(n_chunks, -1)
-    counts = jnp.sum(jnp.isfinite(padded), axis=1)
-    executed = jnp.sum(counts * jnp.max(padded, axis=1))
-    return jnp.sum(s) / executed
-
-
-def difficulty_order(difficulty: ArrayLike) -> jax.Array:
-    """Permutation grouping members of similar predicted difficulty (stable ``argsort``).
-
-    Chunk the members in this order, then scatter the outputs back with
-    ``out[order] = chunked_out`` (or run with ``inputs[order]`` and invert with
-    ``jnp.argsort(order)``).
-
-    Args:
-        difficulty: ``(N,)`` predicted cost per member (a pilot solve's step count, or a
-            closed-form proxy). Only the ranking matters. For torque-free maps
-            ``|L|² = |Iω|²`` is free and ranks Tsit5's step counts well
-            (``benchmarks/lockstep.py``: correlation +0.90 at fixed ``|ω|``, −0.85 at
-            fixed energy; 0.6 for the number of ω periods, 0.97 for a pilot solve).
-
-    Returns:
-        ``(N,)`` int permutation, easiest first.
-    """
-    return jnp.argsort(jnp.asarray(difficulty), stable=True)
+    return flip_interval_asymptotic(moments, speed, eps, toward)

@@ -232,13 +232,20 @@ def test_closed_form_helpers_in_float32(float32):
 # --------------------------------------------------------------------------- lockstep
 
 
-def test_lockstep_efficiency_by_hand():
-    steps = np.array([1, 10, 1, 10])
-    assert float(stability.lockstep_efficiency(steps, 2)) == pytest.approx(22 / 40)
-    order = stability.difficulty_order(steps)
-    assert float(stability.lockstep_efficiency(steps, 2, order)) == pytest.approx(1.0)
-    # a padded last chunk counts only its members
-    assert float(stability.lockstep_efficiency(np.array([4, 2, 3]), 2)) == pytest.approx(9 / 11)
+def test_lockstep_names_are_the_ensemble_schedules():
+    """``lockstep_efficiency`` and ``difficulty_order`` live in ``jrigid.ensemble.schedule``
+    (tests/test_ensemble_schedule.py); the old ``jrigid.stability`` names still work."""
+    from jrigid.ensemble import schedule
+
+    assert stability.lockstep_efficiency is schedule.lockstep_efficiency
+    assert stability.difficulty_order is schedule.difficulty_order
+
+
+def test_ftle_names_are_the_ftle_modules():
+    from jrigid import ftle
+
+    assert stability.ftle_exact is ftle.ftle_exact
+    assert stability.ftle_simulate is ftle.ftle_simulate
 
 
 # --------------------------------------------------------------------------- experiments

@@ -15,7 +15,10 @@
   step (the fast route on a CPU; see :mod:`jrigid.ensemble.lockstep`);
 - :func:`executor` — a Dask executor for ``N`` local worker processes or an existing
   scheduler (what ``jrigid run NAME --workers N`` uses);
-- :func:`default_summary` — what :func:`simulate_many` keeps by default.
+- :func:`default_summary` — what :func:`simulate_many` keeps by default;
+- :func:`difficulty_order`, :func:`lockstep_efficiency` — grouping members of similar
+  cost for ``run(..., order=...)``, and the useful fraction of a chunking's steps
+  (:mod:`jrigid.ensemble.schedule`).
 
 Several processes with one global mesh (``jax.distributed``): call
 ``jax.distributed.initialize()`` on every process before anything else touches JAX, then
@@ -34,12 +37,15 @@ from jrigid.ensemble.executors import executor
 from jrigid.ensemble.lockstep import simulate_lockstep
 from jrigid.ensemble.many import SWEEP_DEFAULTS, SweepWarning, default_summary, simulate_many
 from jrigid.ensemble.runner import run
+from jrigid.ensemble.schedule import difficulty_order, lockstep_efficiency
 
 __all__ = [
     "SWEEP_DEFAULTS",
     "SweepWarning",
     "default_summary",
+    "difficulty_order",
     "executor",
+    "lockstep_efficiency",
     "run",
     "simulate_lockstep",
     "simulate_many",

@@ -1,0 +1,76 @@
+"""Scheduling ensemble members into chunks: how much lockstep work a grouping wastes.
+
+Under ``vmap`` an adaptive solve runs until the slowest member of its chunk is done, so
+a chunk of members of mixed difficulty executes many steps that nobody needs.
+:func:`lockstep_efficiency` measures the useful fraction of the steps a chunking
+executes; :func:`difficulty_order` groups members of similar predicted cost, the
+permutation to pass as :func:`jrigid.ensemble.run`'s ``order`` (``benchmarks/lockstep.py``
+measures both on a stability map).
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+from jax.typing import ArrayLike
+
+__all__ = ["difficulty_order", "lockstep_efficiency"]
+
+
+def lockstep_efficiency(
+    steps: ArrayLike, chunk_size: int, order: ArrayLike | None = None
+) -> jax.Array:
+    """Useful fraction of the steps a chunked ``vmap`` of adaptive solves executes.
+
+    Under ``vmap`` diffrax's loop runs until the slowest member of a chunk is done, so a
+    chunk of ``n`` members needing ``s_i`` steps executes ``n · max s_i`` member-steps.
+    Efficiency ``= Σ s_i / Σ_chunks (n_chunk · max_chunk s_i)`` (a padded last chunk's
+    padding is not counted).
+
+    Args:
+        steps: ``(N,)`` steps each member needs (``Trajectory.stats["num_steps"]``).
+        chunk_size: static members per chunk.
+        order: ``(N,)`` permutation applied before chunking (e.g. :func:`difficulty_order`);
+            default the given order.
+
+    Returns:
+        ``()`` efficiency in ``(0, 1]``.
+
+    Example: two chunks of two, one slow member in each or both in one::
+
+        >>> import jax.numpy as jnp
+        >>> steps = jnp.array([10, 100, 10, 100])
+        >>> round(float(lockstep_efficiency(steps, 2)), 6)
+        0.55
+        >>> round(float(lockstep_efficiency(steps, 2, difficulty_order(steps))), 6)
+        1.0
+    """
+    s = jnp.asarray(steps, dtype=jnp.result_type(float))
+    if order is not None:
+        s = s[jnp.asarray(order)]
+    n = s.shape[0]
+    n_chunks = -(-n // chunk_size)
+    pad = n_chunks * chunk_size - n
+    padded = jnp.concatenate([s, jnp.full((pad,), -jnp.inf, s.dtype)]).reshape(n_chunks, -1)
+    counts = jnp.sum(jnp.isfinite(padded), axis=1)
+    executed = jnp.sum(counts * jnp.max(padded, axis=1))
+    return jnp.sum(s) / executed
+
+
+def difficulty_order(difficulty: ArrayLike) -> jax.Array:
+    """Permutation grouping members of similar predicted difficulty (stable ``argsort``).
+
+    Chunk the members in this order, then scatter the outputs back with
+    ``out[order] = chunked_out`` (or run with ``inputs[order]`` and invert with
+    ``jnp.argsort(order)``), or pass it as :func:`jrigid.ensemble.run`'s ``order``.
+
+    Args:
+        difficulty: ``(N,)`` predicted cost per member (a pilot solve's step count, or a
+            closed-form proxy). Only the ranking matters. For torque-free maps
+            ``|L|² = |Iω|²`` is free and ranks Tsit5's step counts well (how well, and
+            against other proxies: ``benchmarks/lockstep.py``).
+
+    Returns:
+        ``(N,)`` int permutation, easiest first.
+    """
+    return jnp.argsort(jnp.asarray(difficulty), stable=True)
