@@ -36,23 +36,14 @@ from .animation import (
     write_animation,
 )
 from .data import Series, as_series, resample
-from .plots import (
-    plot_estimates,
-    plot_euler_angles,
-    plot_invariants,
-    plot_omega,
-    plot_overview,
-    plot_precession_nutation,
-    plot_q_norm,
-)
+from .plots import *  # noqa: F403 - every name of plots.__all__, added below
 from .render import Camera
 from .shapes import Mesh, box, cylinder, disk, ellipsoid, rod, t_handle
-from .views import DualView, body_still, space_body_views
+from .views import *  # noqa: F403 - every name of views.__all__, added below
 
 __all__ = [
     "AliasingWarning",
     "Camera",
-    "DualView",
     "MIN_WIDTH_PX",
     "Mesh",
     "Series",
@@ -60,7 +51,6 @@ __all__ = [
     "animate",
     "animation",
     "as_series",
-    "body_still",
     "box",
     "cylinder",
     "data",
@@ -71,21 +61,16 @@ __all__ = [
     "fit_rate",
     "frame_times",
     "new_figure",
-    "plot_estimates",
-    "plot_euler_angles",
-    "plot_invariants",
-    "plot_omega",
-    "plot_overview",
-    "plot_precession_nutation",
-    "plot_q_norm",
     "plots",
     "render",
     "resample",
     "rod",
     "save",
     "shapes",
-    "space_body_views",
     "t_handle",
     "views",
     "write_animation",
 ]
+# Modules re-exported whole: their own ``__all__``.
+__all__ += plots.__all__
+__all__ += views.__all__

@@ -117,16 +117,7 @@ def draw_map(
     query[..., mid] = np.cos(lat_c) * np.sin(lon_c)
     query[..., hi] = np.sin(lat_c)
     grid = vals[_nearest(directions, query)]
-    art = ax.pcolormesh(
-        lon_e,
-        lat_e,
-        np.ma.masked_invalid(grid),
-        cmap=cmap,
-        vmin=vmin,
-        vmax=vmax,
-        shading="flat",
-        rasterized=True,
-    )
+    art = _paint(ax, lon_e, lat_e, grid, cmap, vmin, vmax)
     if polhodes is not None:
         for curve in np.asarray(polhodes, dtype=float):
             cl, ca = _split_at_seam(*map_coordinates(curve, moments))
@@ -153,6 +144,20 @@ def draw_map(
     ax.set_yticklabels([])
     ax.grid(True, lw=0.3, alpha=0.4)
     return art
+
+
+def _paint(ax, x_edges, y_edges, grid, cmap, vmin, vmax):
+    """Colour the cells of ``grid`` (NaN cells left blank); the mesh artist."""
+    return ax.pcolormesh(
+        x_edges,
+        y_edges,
+        np.ma.masked_invalid(grid),
+        cmap=cmap,
+        vmin=vmin,
+        vmax=vmax,
+        shading="flat",
+        rasterized=True,
+    )
 
 
 def _view_basis(view):
@@ -205,16 +210,7 @@ def draw_globe(
     zc = np.sqrt(np.where(inside, 1.0 - r2, 0.0))
     query = xc[..., None] * right + yc[..., None] * up + zc[..., None] * v
     grid = np.where(inside, vals[_nearest(directions, query)], np.nan)
-    art = ax.pcolormesh(
-        edges,
-        edges,
-        np.ma.masked_invalid(grid),
-        cmap=cmap,
-        vmin=vmin,
-        vmax=vmax,
-        shading="flat",
-        rasterized=True,
-    )
+    art = _paint(ax, edges, edges, grid, cmap, vmin, vmax)
     if polhodes is not None:
         for curve in np.asarray(polhodes, dtype=float):
             c = curve / np.linalg.norm(curve, axis=-1, keepdims=True)
