@@ -139,6 +139,21 @@ def simulate_many(
     Raises:
         ValueError: as :func:`run`; ``params`` given with a fixed scene or missing for a
             scene function; ``states`` not a :class:`~jrigid.state.State`.
+
+    Example: three spins of one body, kept at five times each::
+
+        >>> import jax, jax.numpy as jnp
+        >>> jax.config.update("jax_enable_x64", True)
+        >>> from jrigid import RigidBody, Scene, ensemble, initial
+        >>> scene = Scene(RigidBody(jnp.array([1.0, 2.0, 3.0])))
+        >>> omegas = jnp.array([[1.0, 0.0, 0.1], [0.0, 0.1, 2.0], [0.1, 1.0, 0.0]])
+        >>> states = jax.vmap(lambda w: initial.from_omega(None, w))(omegas)
+        >>> out = ensemble.simulate_many(scene, states, jnp.linspace(0.0, 1.0, 5),
+        ...                              progress=False)
+        >>> out["q"].shape, out["omega"].shape, out["result"].tolist()
+        ((3, 5, 4), (3, 5, 3), [0, 0, 0])
+        >>> bool(jnp.allclose(out["omega"][:, 0], omegas))
+        True
     """
     if not isinstance(states, State):
         raise ValueError(f"states must be a jrigid State with a leading axis, got {type(states)}")
@@ -176,24 +191,20 @@ def simulate_many(
         "summary": getattr(member.summary, "__qualname__", _describe(member.summary)),
         "shared_step": member.lockstep,
     }
-    stats: dict[str, Any] = {}
-    out = run(
-        member,
-        inputs,
+    # What both runs (the sweep and the failed groups solved again) share.
+    options = dict(
         shared=shared,
         chunk_size=chunk_size,
-        out_dir=out_dir,
-        metadata=meta,
         resume=resume,
         progress=progress,
         devices=devices,
-        info=stats,
-        order=order,
-        batched=member.lockstep,
         check_finite=False,  # a NaN member is an invalid member, not a failed sweep
         executor=executor,
         compile_cache=compile_cache,
     )
+    stats: dict[str, Any] = {}
+    out = run(member, inputs, out_dir=out_dir, metadata=meta, info=stats, order=order,
+              batched=member.lockstep, **options)
     regrouped = np.zeros(0, dtype=int)
     if member.lockstep:
         regrouped = failed_groups(out["result"], None if order is None else np.asarray(order),
@@ -203,16 +214,9 @@ def simulate_many(
         again = run(
             member._replace(lockstep=False),
             jax.tree_util.tree_map(lambda a: np.asarray(a)[regrouped], inputs),
-            shared=shared,
-            chunk_size=chunk_size,
             out_dir=None if out_dir is None else os.path.join(out_dir, "per_member"),
             metadata=dict(meta, solved_again="per member: the members of failed groups"),
-            resume=resume,
-            progress=progress,
-            devices=devices,
-            check_finite=False,
-            executor=executor,
-            compile_cache=compile_cache,
+            **options,
         )
         for k in out:
             out[k][regrouped] = again[k]

@@ -182,7 +182,7 @@ def run(
             stored) in the order ``inputs[order]``, and the results are put back in input
             order. Under ``vmap`` an adaptive solve runs until the slowest member of its
             chunk is done, so grouping members of similar cost raises the useful work
-            (e.g. ``order=jrigid.stability.difficulty_order(proxy)``). It is part of the
+            (e.g. ``order=jrigid.ensemble.difficulty_order(proxy)``). It is part of the
             fingerprint a resumed run must match.
         batched: ``fn`` takes a whole group of members (``member`` with a leading axis
             ``G``) and returns outputs with that leading axis. A group is one device's
@@ -225,31 +225,13 @@ def run(
             another run (``out_dir/.lock``), ``devices`` with ``executor``, or an ``fn``
             that cannot be sent to the executor's workers.
     """
-    if executor is not None:
-        if not isinstance(executor, cf.Executor):
-            raise ValueError(
-                f"executor must be a concurrent.futures.Executor (e.g. a Dask "
-                f"Client.get_executor()), got {type(executor).__name__}"
-            )
-        if devices is not None:
-            raise ValueError("devices is for the in-process run: with an executor each "
-                             "worker computes its chunks on its own first device")
-        devs, spans = [], False
-    else:
-        devs = sharding.resolve_devices(devices)
-        spans = sharding.spans_processes(devs)
+    devs, spans = _devices(executor, devices)
     p = plan(fn, inputs, chunk_size=chunk_size, n_devices=max(1, len(devs)), shared=shared,
              check_finite=check_finite, metadata=metadata, order=order, batched=batched)
     # A mesh over several processes computes each chunk together: process 0 writes.
     writer = not spans or jax.process_index() == 0
     path = None if out_dir is None else pathlib.Path(out_dir)
-    locked = contextlib.nullcontext()
-    if path is not None and writer:
-        if path.exists() and not path.is_dir():
-            raise ValueError(f"out_dir {path} exists and is not a folder")
-        path.mkdir(parents=True, exist_ok=True)
-        locked = storage.lock(path)
-    with locked:
+    with _locked(path, writer):
         start = time.perf_counter()
         results = resume_from(p, path, resume, writer, spans)
         todo = [i for i, r in enumerate(results) if r is None]
@@ -258,18 +240,52 @@ def run(
         if path is not None and writer and todo:
             storage.write_meta(path, dict(p.meta, completed=storage.now()))
     if info is not None:
-        info.update(
-            run_seconds=time.perf_counter() - start - stats["compile_seconds"],
-            chunks_computed=len(todo),
-            chunks_loaded=p.n_chunks - len(todo),
-            n_devices=p.n_devices,
-            batch=p.batch,
-            chunk_size=p.size,
-            n_chunks=p.n_chunks,
-            group=p.group,
-            **stats,
-        )
+        info.update(_statistics(p, todo, stats, time.perf_counter() - start))
     return p.assemble(results)
+
+
+def _devices(executor: cf.Executor | None,
+             devices: Sequence[jax.Device] | None) -> tuple[list[jax.Device], bool]:
+    """The devices each chunk is split over (none with an executor: its workers choose)
+    and whether they span several processes; ``ValueError`` for a bad combination."""
+    if executor is None:
+        devs = sharding.resolve_devices(devices)
+        return devs, sharding.spans_processes(devs)
+    if not isinstance(executor, cf.Executor):
+        raise ValueError(
+            f"executor must be a concurrent.futures.Executor (e.g. a Dask "
+            f"Client.get_executor()), got {type(executor).__name__}"
+        )
+    if devices is not None:
+        raise ValueError("devices is for the in-process run: with an executor each "
+                         "worker computes its chunks on its own first device")
+    return [], False
+
+
+def _locked(path: pathlib.Path | None, writer: bool) -> contextlib.AbstractContextManager:
+    """The lock on ``path`` (created) for the writing process; nothing otherwise."""
+    if path is None or not writer:
+        return contextlib.nullcontext()
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"out_dir {path} exists and is not a folder")
+    path.mkdir(parents=True, exist_ok=True)
+    return storage.lock(path)
+
+
+def _statistics(p: Plan, todo: Sequence[int], stats: dict[str, Any],
+                seconds: float) -> dict[str, Any]:
+    """What ``run`` reports in ``info``: the chunking, and where the ``seconds`` went."""
+    return dict(
+        run_seconds=seconds - stats["compile_seconds"],
+        chunks_computed=len(todo),
+        chunks_loaded=p.n_chunks - len(todo),
+        n_devices=p.n_devices,
+        batch=p.batch,
+        chunk_size=p.size,
+        n_chunks=p.n_chunks,
+        group=p.group,
+        **stats,
+    )
 
 
 def _dispatch(p: Plan, todo, results, path, progress, writer, executor, devs, spans,
