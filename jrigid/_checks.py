@@ -1,4 +1,4 @@
-"""Private input helpers shared by every layer: float conversion, shapes, error reporting.
+"""Input helpers shared by every layer: float conversion, shapes, error reporting.
 
 Errors follow one rule across jrigid: a wrong shape raises ``ValueError`` while tracing
 (:func:`check_shape`, free under ``jit``); with concrete values a bad value raises
@@ -16,12 +16,19 @@ import jax.numpy as jnp
 from jax.typing import ArrayLike
 
 
-def as_float(x: ArrayLike) -> jax.Array:
-    """``x`` as a strongly typed floating array (ints become the default float).
+def as_float(x: ArrayLike, *, weak: bool = False) -> jax.Array:
+    """``x`` as a floating array (ints become the default float).
 
-    Strong typing keeps Python scalars from changing a compiled signature.
+    By default the result is strongly typed: strong typing keeps Python scalars from
+    changing a compiled signature. ``weak=True`` keeps a Python scalar weakly typed, so
+    that it takes the dtype of the arrays it meets (the quaternion functions: a float32
+    quaternion interpolated with ``t=0.5`` stays float32 with float64 enabled).
     """
     x = jnp.asarray(x)
+    if weak:
+        if not jnp.issubdtype(x.dtype, jnp.inexact):
+            x = x.astype(jnp.result_type(float))
+        return x
     dtype = x.dtype if jnp.issubdtype(x.dtype, jnp.inexact) else jnp.result_type(float)
     return jnp.asarray(x, dtype=jax.dtypes.canonicalize_dtype(dtype))
 

@@ -20,6 +20,7 @@ import jax.numpy as jnp
 
 from jrigid._checks import as_float, check_shape, fail_if
 from jrigid.affine import apply_to_points, from_blocks
+from jrigid.linalg import safe_norm
 
 __all__ = ["look_at", "orthographic", "perspective"]
 
@@ -52,13 +53,6 @@ def orthographic(points, axis: int = 2) -> tuple[jax.Array, jax.Array]:
     return uv, -points[..., axis]
 
 
-def _safe_norm(x: jax.Array) -> tuple[jax.Array, jax.Array]:
-    """Norm of ``x (..., 3)`` and a flag for zero, with finite gradients at zero."""
-    sq = jnp.sum(x * x, axis=-1)
-    zero = sq == 0
-    return jnp.where(zero, 0.0, jnp.sqrt(jnp.where(zero, 1.0, sq))), zero
-
-
 def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> jax.Array:
     """World → camera view matrix of a camera at ``eye`` looking at ``target``.
 
@@ -85,7 +79,7 @@ def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> jax.Array:
         lambda: f"eye {eye}, target {target}, up {up}",
     )
     forward = target - eye
-    dist, zero = _safe_norm(forward)
+    dist = safe_norm(forward)
     scale = jnp.maximum(jnp.max(jnp.abs(eye), axis=-1), jnp.max(jnp.abs(target), axis=-1))
     tiny = jnp.finfo(forward.dtype).eps * jnp.maximum(scale, 1.0)
     forward = fail_if(
@@ -94,17 +88,17 @@ def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> jax.Array:
         "look_at: zero-length look direction (eye == target)",
         lambda: f"eye {eye}, target {target}",
     )
-    f = forward / jnp.where(zero, 1.0, dist)[..., None]
+    f = forward / jnp.where(dist == 0, 1.0, dist)[..., None]
     right = jnp.cross(f, up)
-    rnorm, rzero = _safe_norm(right)
-    unorm, _ = _safe_norm(up)
+    rnorm = safe_norm(right)
+    unorm = safe_norm(up)
     right = fail_if(
         right,
         ~(rnorm > 1e3 * jnp.finfo(right.dtype).eps * unorm),
         "look_at: `up` is zero or parallel to the look direction",
         lambda: f"up {up}, look direction {f}",
     )
-    r = right / jnp.where(rzero, 1.0, rnorm)[..., None]
+    r = right / jnp.where(rnorm == 0, 1.0, rnorm)[..., None]
     u = jnp.cross(r, f)
     rows = jnp.stack([r, u, -f], axis=-2)  # = Rᵀ
     return from_blocks(rows, -(rows @ eye[..., None])[..., 0])

@@ -1,19 +1,22 @@
 """Small-vector linear algebra written out component by component.
 
-Dot products (of 3- and 4-vectors), unit vectors, cross products and ``3 × 3`` solves of rigid-body
-mechanics, as sums of products rather than reductions or library calls: inside an
-integrator's loop XLA fuses them with their neighbours on a CPU, where each reduction or
-LAPACK call would start a kernel of its own (a step of the quaternion-acceleration
-field costs about 4× less this way). All functions take any leading batch shape.
+Dot products (of 3- and 4-vectors), unit vectors, cross products, ``3 × 3`` solves and
+scale-safe norms (:func:`rescale`, :func:`safe_norm`) of rigid-body mechanics, as sums of
+products rather than reductions or library calls: inside an integrator's loop XLA fuses
+them with their neighbours on a CPU, where each reduction or LAPACK call would start a
+kernel of its own (a step of the quaternion-acceleration field costs several times less
+this way). All functions take any leading batch shape.
 """
 
 from __future__ import annotations
+
+import math
 
 import jax
 import jax.numpy as jnp
 from jax import lax
 
-__all__ = ["cross", "dot", "matvec", "norm2", "solve3", "unit"]
+__all__ = ["cross", "dot", "matvec", "norm2", "rescale", "safe_norm", "solve3", "unit"]
 
 
 def dot(a: jax.Array, b: jax.Array) -> jax.Array:
@@ -79,3 +82,40 @@ def solve3(m: jax.Array, b: jax.Array) -> jax.Array:
     c2 = cross(m[..., :, 0], m[..., :, 1])
     det = dot(m[..., :, 0], c0)
     return jnp.stack([dot(c0, b), dot(c1, b), dot(c2, b)], axis=-1) / det[..., None]
+
+
+def rescale(x: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """Split ``x (..., n)`` into ``(x / s, s)`` so that squaring ``x / s`` is safe.
+
+    ``s (..., 1)`` is ``1`` (and ``x`` is returned unchanged, bit for bit) unless the
+    largest ``|component|`` lies outside ``[sqrt(tiny)/eps, sqrt(max)/(2n)]``, where the
+    sum of squares would overflow or lose precision; then ``s`` is that largest
+    component, so ``x / s`` has entries in ``[-1, 1]``. A zero ``x`` keeps ``s = 1``. An
+    ``x`` with a NaN or infinite entry has no direction: ``x / s`` is all NaN there, so
+    every function built on it returns NaN for that element. ``s`` carries no gradient:
+    functions of ``x`` that are homogeneous (``normalize``, ``norm``, the conversions)
+    then still get exact derivatives. The largest component is found by elementwise
+    maxima over the (short) last axis, not a reduction, so that XLA fuses it with its
+    neighbours (see the module docstring).
+    """
+    info = jnp.finfo(x.dtype)
+    lo = math.sqrt(float(info.tiny)) / float(info.eps)
+    hi = math.sqrt(float(info.max)) / (2.0 * x.shape[-1])
+    m = jnp.abs(x[..., :1])
+    for i in range(1, x.shape[-1]):
+        m = jnp.maximum(m, jnp.abs(x[..., i : i + 1]))
+    finite = jnp.isfinite(m)
+    keep = ((m >= lo) & (m <= hi)) | (m == 0) | ~finite
+    s = lax.stop_gradient(jnp.where(keep, jnp.ones_like(m), m))
+    return jnp.where(finite, x / s, jnp.nan), s
+
+
+def safe_norm(v: jax.Array) -> jax.Array:
+    """Euclidean norm over the last axis, safe for any finite scale (see :func:`rescale`),
+    with a finite (zero) gradient at the zero vector (double ``where``); NaN for a
+    vector with a NaN or infinite entry."""
+    v, s = rescale(v)
+    n2 = norm2(v)
+    zero = n2 == 0
+    n2_safe = jnp.where(zero, jnp.ones_like(n2), n2)
+    return s[..., 0] * jnp.where(zero, jnp.zeros_like(n2), jnp.sqrt(n2_safe))

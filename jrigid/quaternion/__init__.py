@@ -6,8 +6,9 @@ matrices are active (``v_space = R @ v_body``) and match scipy's ``Rotation``; t
 chapter's passive matrices (17.8, 17.10, 17.28) are reproduced by the ``passive_*``
 functions. Angular velocity is body frame unless a name says ``space``.
 
-Modules: ``core`` (algebra, axis-angle, rotation vectors, slerp, kinematics),
-``matrix`` (matrices, Rodrigues), ``euler`` (Euler angles), ``validate`` (input checks).
+Modules: ``core`` (algebra, axis-angle, rotation vectors, slerp), ``kinematics``
+(``q̇`` and ω), ``matrix`` (matrices, Rodrigues), ``euler`` (Euler angles), ``validate``
+(input checks).
 
 Bad input:
 
@@ -23,12 +24,8 @@ Bad input:
 """
 
 from .core import (
-    angular_velocity,
-    angular_velocity_space,
     canonicalize,
     conjugate,
-    derivative,
-    derivative_space,
     distance,
     from_axis_angle,
     from_rotvec,
@@ -44,10 +41,16 @@ from .core import (
     to_axis_angle,
     to_rotvec,
     to_xyzw,
+)
+from .euler import EULER_SEQUENCES, from_euler, gimbal_lock, to_euler
+from .kinematics import (
+    angular_velocity,
+    angular_velocity_space,
+    derivative,
+    derivative_space,
     w_matrix,
     w_matrix_space,
 )
-from .euler import EULER_SEQUENCES, from_euler, gimbal_lock, to_euler
 from .matrix import (
     from_matrix,
     passive_axis_matrix,

@@ -1,9 +1,10 @@
-"""Quaternion algebra, axis-angle, rotation vectors, slerp and kinematics.
+"""Quaternion algebra, rotation of vectors, axis-angle, rotation vectors and slerp.
 
 Conventions (see the package docstring): quaternions are ``(..., 4)`` arrays, scalar
 first ``(w, x, y, z)`` = the chapter's ``(q0, q1, q2, q3)``; a unit quaternion ``q``
 maps body to space, ``v_space = q ⊗ (0, v_body) ⊗ q*`` (eq. 17.26); angular velocity
-is body frame unless a name says ``space``; ``q̇ = ½ q ⊗ (0, ω_body)`` (eq. 17.44).
+is body frame unless a name says ``space``. The kinematics
+(``q̇ = ½ q ⊗ (0, ω_body)``, eq. 17.44) are in :mod:`jrigid.quaternion.kinematics`.
 
 Every function broadcasts over leading batch dimensions (explicitly, so it also works
 with ``jax_numpy_rank_promotion="raise"``), and has finite gradients at the identity
@@ -25,26 +26,13 @@ import jax
 import jax.numpy as jnp
 from jax.typing import ArrayLike
 
-from ._utils import (
-    as_float_pair,
-    broadcast_batch,
-    cross,
-    dot,
-    epsilon,
-    quaternion_arg,
-    rescale,
-    safe_norm,
-    unit,
-    vector_arg,
-)
+from jrigid.linalg import cross, dot, rescale, safe_norm
+
+from ._utils import as_float_pair, broadcast_batch, epsilon, quaternion_arg, unit, vector_arg
 
 __all__ = [
-    "angular_velocity",
-    "angular_velocity_space",
     "canonicalize",
     "conjugate",
-    "derivative",
-    "derivative_space",
     "distance",
     "from_axis_angle",
     "from_rotvec",
@@ -60,8 +48,6 @@ __all__ = [
     "to_axis_angle",
     "to_rotvec",
     "to_xyzw",
-    "w_matrix",
-    "w_matrix_space",
 ]
 
 
@@ -222,6 +208,19 @@ def rotate(q: ArrayLike, v: ArrayLike) -> jax.Array:
 
     Returns:
         ``(..., 3)`` rotated vector.
+
+    Example:
+        A quarter turn about ``z`` takes ``x`` to ``y``; composed with itself
+        (:func:`multiply`) it is a half turn, taking ``x`` to ``−x``:
+
+        >>> import jax.numpy as jnp
+        >>> from jrigid import quaternion as quat
+        >>> q = quat.from_axis_angle(jnp.array([0.0, 0.0, 1.0]), jnp.pi / 2)
+        >>> x = jnp.array([1.0, 0.0, 0.0])
+        >>> print(jnp.round(quat.rotate(q, x), 6) + 0.0)
+        [0. 1. 0.]
+        >>> print(jnp.round(quat.rotate(quat.multiply(q, q), x), 6) + 0.0)
+        [-1.  0.  0.]
     """
     q, v = as_float_pair(quaternion_arg(q), vector_arg(v, "v"))
     q, v = broadcast_batch(q, 1, v, 1)
@@ -424,116 +423,18 @@ def to_xyzw(q: ArrayLike) -> jax.Array:
     return jnp.concatenate([q[..., 1:], q[..., :1]], axis=-1)
 
 
-# ---------------------------------------------------------------------------
-# Kinematics (17.37-17.44)
-# ---------------------------------------------------------------------------
+
+# The kinematics live in jrigid.quaternion.kinematics (which builds on this module);
+# their names stay importable from here, loaded on first use.
+_KINEMATICS = frozenset(
+    "angular_velocity angular_velocity_space derivative derivative_space w_matrix "
+    "w_matrix_space".split()
+)
 
 
-def w_matrix(q: ArrayLike) -> jax.Array:
-    """The chapter's matrix ``W`` (eq. 17.43, first three rows), body frame.
+def __getattr__(name: str):
+    if name in _KINEMATICS:
+        from . import kinematics
 
-    ``ω_body = 2 W q̇`` (eq. 17.42) and, for unit ``q``, ``q̇ = ½ Wᵀ ω_body`` (eq. 17.44)
-    because the rows of ``W`` are orthonormal. ``2 W q̇`` is the vector part of
-    ``2 q* ⊗ q̇``. The chapter's fourth row ``(q0, q1, q2, q3)`` gives ``q·q̇ = 0``.
-
-    Args:
-        q: ``(..., 4)`` unit quaternion.
-
-    Returns:
-        ``(..., 3, 4)``::
-
-            [[-q1,  q0,  q3, -q2],
-             [-q2, -q3,  q0,  q1],
-             [-q3,  q2, -q1,  q0]]
-    """
-    q = quaternion_arg(q)
-    q0, q1, q2, q3 = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    rows = [
-        jnp.stack([-q1, q0, q3, -q2], axis=-1),
-        jnp.stack([-q2, -q3, q0, q1], axis=-1),
-        jnp.stack([-q3, q2, -q1, q0], axis=-1),
-    ]
-    return jnp.stack(rows, axis=-2)
-
-
-def w_matrix_space(q: ArrayLike) -> jax.Array:
-    """Space-frame counterpart of :func:`w_matrix`: ``ω_space = 2 W_s q̇``.
-
-    ``2 W_s q̇`` is the vector part of ``2 q̇ ⊗ q*`` (the chapter's eq. 17.41).
-
-    Args:
-        q: ``(..., 4)`` unit quaternion.
-
-    Returns:
-        ``(..., 3, 4)``::
-
-            [[-q1,  q0, -q3,  q2],
-             [-q2,  q3,  q0, -q1],
-             [-q3, -q2,  q1,  q0]]
-    """
-    q = quaternion_arg(q)
-    q0, q1, q2, q3 = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    rows = [
-        jnp.stack([-q1, q0, -q3, q2], axis=-1),
-        jnp.stack([-q2, q3, q0, -q1], axis=-1),
-        jnp.stack([-q3, -q2, q1, q0], axis=-1),
-    ]
-    return jnp.stack(rows, axis=-2)
-
-
-def _pure(v: jax.Array) -> jax.Array:
-    return jnp.concatenate([jnp.zeros_like(v[..., :1]), v], axis=-1)
-
-
-def derivative(q: ArrayLike, omega_body: ArrayLike) -> jax.Array:
-    """Quaternion rate ``q̇ = ½ q ⊗ (0, ω_body)`` (eq. 17.44, ``= ½ Wᵀ ω``).
-
-    Args:
-        q: ``(..., 4)`` unit quaternion (body → space).
-        omega_body: ``(..., 3)`` body-frame angular velocity; batch dimensions broadcast.
-
-    Returns:
-        ``(..., 4)`` time derivative of ``q``.
-    """
-    q, omega = as_float_pair(quaternion_arg(q), vector_arg(omega_body, "omega_body"))
-    return 0.5 * multiply(q, _pure(omega))
-
-
-def derivative_space(q: ArrayLike, omega_space: ArrayLike) -> jax.Array:
-    """Quaternion rate from the space-frame angular velocity: ``q̇ = ½ (0, ω_space) ⊗ q``.
-
-    Args:
-        q: ``(..., 4)`` unit quaternion.
-        omega_space: ``(..., 3)`` space-frame angular velocity.
-
-    Returns:
-        ``(..., 4)``.
-    """
-    q, omega = as_float_pair(quaternion_arg(q), vector_arg(omega_space, "omega_space"))
-    return 0.5 * multiply(_pure(omega), q)
-
-
-def angular_velocity(q: ArrayLike, qdot: ArrayLike) -> jax.Array:
-    """Body-frame angular velocity ``ω = 2 W q̇`` = vector part of ``2 q* ⊗ q̇`` (eq. 17.42).
-
-    Args:
-        q: ``(..., 4)`` unit quaternion.
-        qdot: ``(..., 4)`` its time derivative.
-
-    Returns:
-        ``(..., 3)`` body-frame angular velocity.
-    """
-    return 2.0 * multiply(conjugate(q), quaternion_arg(qdot, "qdot"))[..., 1:]
-
-
-def angular_velocity_space(q: ArrayLike, qdot: ArrayLike) -> jax.Array:
-    """Space-frame angular velocity = vector part of ``2 q̇ ⊗ q*`` (eq. 17.41).
-
-    Args:
-        q: ``(..., 4)`` unit quaternion.
-        qdot: ``(..., 4)`` its time derivative.
-
-    Returns:
-        ``(..., 3)`` space-frame angular velocity.
-    """
-    return 2.0 * multiply(quaternion_arg(qdot, "qdot"), conjugate(q))[..., 1:]
+        return getattr(kinematics, name)
+    raise AttributeError(f"module 'jrigid.quaternion.core' has no attribute {name!r}")

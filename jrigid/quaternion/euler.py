@@ -28,7 +28,9 @@ import jax
 import jax.numpy as jnp
 from jax.typing import ArrayLike
 
-from ._utils import quaternion_arg, rescale, vector_arg
+from jrigid.linalg import rescale
+
+from ._utils import quaternion_arg, vector_arg
 from .core import multiply
 
 __all__ = ["EULER_SEQUENCES", "from_euler", "gimbal_lock", "to_euler"]

@@ -14,17 +14,15 @@ import jax
 import jax.numpy as jnp
 from jax.typing import ArrayLike
 
+from jrigid._checks import as_float, is_traced
+from jrigid.linalg import cross, dot, rescale
+
 from ._utils import (
-    as_float,
     as_float_all,
     as_float_pair,
     broadcast_batch,
-    cross,
-    dot,
-    is_traced,
     matrix_arg,
     quaternion_arg,
-    rescale,
     unit,
     vector_arg,
 )
@@ -264,7 +262,7 @@ def passive_axis_matrix(axis: int | str, angle: ArrayLike) -> jax.Array:
         raise ValueError(f"axis must be one of 0, 1, 2, 'x', 'y', 'z'; got {axis!r}")
     i = _AXIS_INDEX[key]
     j, k = (i + 1) % 3, (i + 2) % 3
-    angle = as_float(angle)
+    angle = as_float(angle, weak=True)
     c, s = jnp.cos(angle), jnp.sin(angle)
     one, zero = jnp.ones_like(c), jnp.zeros_like(c)
     m = [[None] * 3 for _ in range(3)]

@@ -23,8 +23,9 @@ import jax.numpy as jnp
 from jax.typing import ArrayLike
 
 from jrigid._checks import fail_if
+from jrigid.linalg import safe_norm
 
-from ._utils import matrix_arg, quaternion_arg, safe_norm
+from ._utils import matrix_arg, quaternion_arg
 
 __all__ = ["check_quaternion", "check_rotation_matrix", "default_atol"]
 
