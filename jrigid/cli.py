@@ -44,6 +44,11 @@ _PARAM_HELP = (
 )
 
 
+def _add_out(parser: argparse.ArgumentParser, help: str) -> None:
+    """The ``--out DIR`` option of a subcommand (``None`` when not given)."""
+    parser.add_argument("--out", metavar="DIR", type=Path, default=None, help=help)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser with its ``list``, ``run``, ``demo`` and ``docs`` subcommands."""
     parser = argparse.ArgumentParser(
@@ -88,12 +93,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="run the experiment's ensemble on the Dask scheduler at ADDRESS "
         "(e.g. tcp://head:8786, a dask-jobqueue cluster)",
     )
-    p_run.add_argument(
-        "--out",
-        metavar="DIR",
-        type=Path,
-        default=None,
-        help="results folder (default results/NAME; with `all`, the parent of one folder each)",
+    _add_out(
+        p_run, "results folder (default results/NAME; with `all`, the parent of one folder each)"
     )
 
     p_demo = sub.add_parser(
@@ -105,13 +106,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p_demo.add_argument("params", nargs="*", metavar="KEY=VALUE", help=_PARAM_HELP)
     p_demo.add_argument("--quick", action="store_true", help="shorter run with fewer frames")
-    p_demo.add_argument(
-        "--out",
-        metavar="DIR",
-        type=Path,
-        default=None,
-        help="results folder (default results/demo)",
-    )
+    _add_out(p_demo, "results folder (default results/demo)")
     p_docs = sub.add_parser(
         "docs",
         help="build or serve the documentation site (needs the docs extra)",
@@ -121,9 +116,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p_docs.add_argument("action", choices=("build", "serve"), help="build the site, or serve it")
     p_docs.add_argument("--quick", action="store_true", help="run the tutorials at small sizes")
-    p_docs.add_argument(
-        "--out", metavar="DIR", type=Path, default=None, help="site folder (default: site/)"
-    )
+    _add_out(p_docs, "site folder (default: site/)")
     for p in (p_list, p_run, p_demo, p_docs):
         p.set_defaults(subparser=p)  # so that errors print the subcommand's usage
     return parser
