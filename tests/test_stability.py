@@ -241,11 +241,13 @@ def test_lockstep_names_are_the_ensemble_schedules():
     assert stability.difficulty_order is schedule.difficulty_order
 
 
-def test_ftle_names_are_the_ftle_modules():
-    from jrigid import ftle
+def test_ftle_and_polhode_names_are_their_modules():
+    from jrigid import ftle, polhode
 
     assert stability.ftle_exact is ftle.ftle_exact
     assert stability.ftle_simulate is ftle.ftle_simulate
+    for name in polhode.__all__:
+        assert getattr(stability, name) is getattr(polhode, name)
 
 
 # --------------------------------------------------------------------------- experiments
