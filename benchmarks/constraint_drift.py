@@ -15,16 +15,20 @@ Prints a markdown table and writes ``benchmarks/results/constraint_drift_rtol<rt
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import pathlib
+import sys
 import time
 
 import jax
 import jax.numpy as jnp
 
 jax.config.update("jax_enable_x64", True)
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+
+import harness  # noqa: E402
 
 from jrigid.body import RigidBody  # noqa: E402
 from jrigid.formulations import QuaternionAcceleration  # noqa: E402
@@ -82,7 +86,7 @@ def run(periods: float, rtol: float, atol: float, samples: int) -> list[dict]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = harness.command_line(__doc__, out=False)
     parser.add_argument("--periods", type=float, default=1e4)
     parser.add_argument("--rtol", type=float, default=1e-6)
     parser.add_argument("--atol", type=float, default=1e-8)
@@ -102,8 +106,7 @@ def main() -> None:
             f"{r['max_energy_error']:.2e} | {r['max_momentum_error']:.2e} | "
             f"{r['steps']} | {r['seconds']:.2f} |"
         )
-    out = pathlib.Path(__file__).parent / "results"
-    out.mkdir(exist_ok=True)
+    out = harness.results_dir()
     payload = dict(
         periods=args.periods, rtol=args.rtol, atol=args.atol, solver="Tsit5", rows=rows
     )

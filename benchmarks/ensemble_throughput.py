@@ -61,11 +61,14 @@ Writes ``ensemble_throughput[_quick].json`` and ``.md`` to ``benchmarks/results/
 
 from __future__ import annotations
 
-import argparse
 import os
 import pathlib
 import sys
 import time
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+
+import harness  # noqa: E402  (imports no JAX: the flags below are set before JAX starts)
 
 
 def _usable_cores() -> int:
@@ -76,13 +79,11 @@ def _usable_cores() -> int:
 
 
 def _parse(argv):
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--quick", action="store_true", help="N = 1000 directions, ~30-40 s")
+    parser = harness.command_line(__doc__, quick="N = 1000 directions, ~30-40 s")
     parser.add_argument("--n", type=int, default=None, help="number of directions")
     parser.add_argument("--subset", type=int, default=None, help="members timed for scipy/MuJoCo")
     parser.add_argument("--devices", type=int, default=None,
                         help="XLA host devices to force (default: none, as a user gets)")
-    parser.add_argument("--out", default=None, help="output directory (default benchmarks/results)")
     parser.add_argument("--extra", action="store_true",
                         help="also time shared-step quaternion_acceleration and Dopri8")
     parser.add_argument("--figure", default=None,
@@ -105,10 +106,6 @@ import numpy as np  # noqa: E402
 from scipy.integrate import solve_ivp  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
-
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-
-import harness  # noqa: E402
 
 from jrigid import ensemble, initial  # noqa: E402
 from jrigid.body import RigidBody  # noqa: E402
@@ -630,7 +627,7 @@ def main() -> dict:
     res["total_seconds"] = time.perf_counter() - start_all
     text = report(res)
     out_dir = harness.results_dir(args.out)
-    stem = "ensemble_throughput" + ("_quick" if args.quick else "")
+    stem = harness.stem("ensemble_throughput", args.quick)
     harness.write_json(out_dir / f"{stem}.json", res)
     harness.write_text(out_dir / f"{stem}.md", text)
     if args.figure:

@@ -23,7 +23,6 @@ markdown table and writes ``benchmarks/results/fit_adjoint[_quick].json``.
 
 from __future__ import annotations
 
-import argparse
 import pathlib
 import sys
 
@@ -41,6 +40,7 @@ from jax.flatten_util import ravel_pytree  # noqa: E402
 
 from jrigid import exact, fit, initial  # noqa: E402
 from jrigid.body import RigidBody  # noqa: E402
+from jrigid.integrate import simulate  # noqa: E402
 from jrigid.scene import Scene  # noqa: E402
 
 MOMENTS = jnp.array([1.0, 2.0, 2.5]) / 5.5
@@ -95,9 +95,7 @@ def measure(duration: float, samples: int, repeats: int) -> dict:
     g_fwd = np.asarray(results["grad (forward)"][1])
     agree = float(np.max(np.abs(g_rev - g_fwd)) / np.max(np.abs(g_rev)))
     steps = int(
-        __import__("jrigid.simulate", fromlist=["simulate"])
-        .simulate(*build(theta), reverse.ts, rtol=1e-8, atol=1e-10)
-        .stats["num_accepted_steps"]
+        simulate(*build(theta), reverse.ts, rtol=1e-8, atol=1e-10).stats["num_accepted_steps"]
     )
     t_fwd = results["forward"][0].median
     rows = {}
@@ -124,9 +122,8 @@ def measure(duration: float, samples: int, repeats: int) -> dict:
 
 
 def main(argv=None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = harness.command_line(__doc__, quick="one short record, few repeats", out=False)
     parser.add_argument("--durations", type=float, nargs="+", default=[4.0, 16.0, 64.0])
-    parser.add_argument("--quick", action="store_true", help="one short record, few repeats")
     args = parser.parse_args(argv)
     durations = [4.0] if args.quick else args.durations
     repeats = 3 if args.quick else 7
@@ -164,7 +161,7 @@ def main(argv=None) -> dict:
         )
     text = harness.machine_line(out["machine"]) + "\n" + "\n".join(lines)
     print(text)
-    name = "fit_adjoint_quick" if args.quick else "fit_adjoint"
+    name = harness.stem("fit_adjoint", args.quick)
     path = harness.write_json(harness.results_dir() / f"{name}.json", out)
     harness.write_text(harness.results_dir() / f"{name}.md", text + "\n")
     print(f"\nwrote {path}")

@@ -29,6 +29,10 @@ import warnings
 
 import numpy as np
 
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+
+import harness  # noqa: E402
+
 MOMENTS = (1.0, 2.0, 3.0)
 OMEGA0 = (0.1, 0.05, 1.0)
 RTOLS = (1e-5, 2e-6)
@@ -96,7 +100,7 @@ def table(rows: list[dict]) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = harness.command_line(__doc__, out=False)
     parser.add_argument("--periods", type=float, nargs="+", default=[10, 100, 1000, 10_000])
     parser.add_argument("--child", type=int, choices=(32, 64), help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -128,8 +132,7 @@ def main() -> None:
         angle = np.degrees(np.asarray(jrigid.quaternion.distance(q, refs[row["periods"]])))
         row["max_error_deg"] = float(np.nanmax(angle)) if np.isfinite(angle).any() else None
     print(table(rows))
-    path = pathlib.Path(__file__).parent / "results" / "float32_horizon.json"
-    path.parent.mkdir(exist_ok=True)
+    path = harness.results_dir() / "float32_horizon.json"
     path.write_text(json.dumps(rows, indent=1))
 
 

@@ -63,7 +63,6 @@ from scipy.optimize import brentq
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 
 import harness  # noqa: E402
-import speed_vs_error as sve  # noqa: E402
 
 __all__ = [
     "CASES",
@@ -177,7 +176,15 @@ def published_rhs(coeffs):
     return rhs
 
 
-def _published(name):
+def published(name: str) -> tuple[tuple, tuple, tuple]:
+    """A published check as printed: ``(body, coeffs, y0)``.
+
+    ``name`` is ``"B5"`` (DETEST B5) or ``"HNW"`` (Hairer–Nørsett–Wanner's rigid body);
+    ``coeffs`` are the published ``c`` of ``y' = c ⊙ (y2 y3, y3 y1, y1 y2)`` and ``y0``
+    the published initial value; ``body`` is a physical body whose Euler coefficients
+    have the signs of ``c``, so that ``ω = d ⊙ y`` with ``d = diagonal_map(body, coeffs)``
+    solves its Euler equations.
+    """
     if name == "B5":
         return B5_BODY, B5_COEFFS, B5_Y0
     return HNW_BODY, HNW_COEFFS, HNW_Y0
@@ -185,7 +192,7 @@ def _published(name):
 
 def published_map(case: Case) -> np.ndarray:
     """``d`` (3,) of the case's ``ω = d ⊙ y`` (published checks only)."""
-    body, coeffs, _ = _published(case.published)
+    body, coeffs, _ = published(case.published)
     return diagonal_map(body, coeffs)
 
 
@@ -364,12 +371,12 @@ def time_scale(case: Case) -> float:
 # ------------------------------------------------------------------ scenes and states
 
 
-def problem(case: Case, size: str = "full") -> sve.Problem:
-    """The case as a :class:`speed_vs_error.Problem` (scene, state, numpy equations)."""
+def problem(case: Case, size: str = "full") -> harness.Problem:
+    """The case as a :class:`harness.Problem` (scene, state, numpy equations)."""
     t1 = horizon(case, size)
     if case.torque_free:
-        return sve.Problem(case.key, case.title, case.moments, omega0=case.omega0, t1=t1)
-    return sve.Problem(
+        return harness.Problem(case.key, case.title, case.moments, omega0=case.omega0, t1=t1)
+    return harness.Problem(
         case.key, case.title, case.moments, euler0=(0.0, case.tilt, 0.0),
         rates0=(0.0, 0.0, case.top_spin), mass=case.mass, com=(0.0, 0.0, case.height),
         g=case.g, t1=t1,

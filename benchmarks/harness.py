@@ -1,8 +1,12 @@
 """Shared machinery for jrigid's benchmarks: timing, errors, machine description, writers.
 
 Every benchmark script in ``benchmarks/`` imports this module (``import harness`` after
-putting ``benchmarks/`` on ``sys.path``). It holds no physics, only:
+putting ``benchmarks/`` on ``sys.path``). It holds:
 
+- :func:`command_line` — the options every benchmark's ``main`` shares (``--quick``,
+  ``--out``, ``--quiet``), :func:`logger` and :func:`stem` (the output files' name);
+- :class:`Problem` — a benchmark problem (a free rotor or a heavy top): its scene, initial
+  state and the numpy/JAX right-hand sides a user would write by hand;
 - :func:`machine_info` / :func:`machine_line` — CPU model, cores, load, library versions;
 - :func:`compile_jax` — ahead-of-time ``lower(...).compile()`` of a jitted function, so
   compile time is measured on its own and never mixed into run times;
@@ -21,10 +25,14 @@ putting ``benchmarks/`` on ``sys.path``). It holds no physics, only:
   its object-oriented API: ``Figure`` and the Agg canvas, no pyplot state).
 
 Results go to ``benchmarks/results/`` (git-ignored); see :func:`results_dir`.
+
+The module imports neither JAX nor jrigid at the top (:class:`Problem` does when used),
+so a benchmark can parse its command line and set XLA flags before JAX starts.
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import os
@@ -42,7 +50,9 @@ import numpy as np
 
 __all__ = [
     "Point",
+    "Problem",
     "Timing",
+    "command_line",
     "compile_jax",
     "fmt_seconds",
     "machine_info",
@@ -52,7 +62,9 @@ __all__ = [
     "pareto_front",
     "points_as_dicts",
     "quaternion_error",
+    "logger",
     "results_dir",
+    "stem",
     "sweep",
     "sweep_methods",
     "time_interleaved",
@@ -65,6 +77,42 @@ __all__ = [
 ]
 
 RESULTS = pathlib.Path(__file__).resolve().parent / "results"
+OUT_HELP = "output directory (default benchmarks/results)"
+
+
+# --------------------------------------------------------------------------- command line
+
+
+def command_line(doc: str | None, *, quick: str | None = None, out: bool = True,
+                 quiet: bool = False) -> argparse.ArgumentParser:
+    """The argument parser every benchmark's ``main`` starts from.
+
+    The description is the first paragraph of the script's docstring ``doc``. Options:
+    ``--quick`` (when ``quick`` is given: its help, saying what the quick run does),
+    ``--out`` (the output directory, default ``benchmarks/results``; see
+    :func:`results_dir`) and ``--quiet`` (print only the final tables; see
+    :func:`logger`). The script adds its own options to the returned parser.
+    """
+    parser = argparse.ArgumentParser(description=(doc or "").split("\n\n")[0])
+    if quick is not None:
+        parser.add_argument("--quick", action="store_true", help=quick)
+    if out:
+        parser.add_argument("--out", default=None, help=OUT_HELP)
+    if quiet:
+        parser.add_argument("--quiet", action="store_true", help="print only the final tables")
+    return parser
+
+
+def logger(quiet: bool = False) -> Callable[..., None]:
+    """``print`` (flushed) for progress lines, or nothing with ``--quiet``."""
+    if quiet:
+        return lambda *a: None
+    return lambda *a: print(*a, flush=True)
+
+
+def stem(name: str, quick: bool) -> str:
+    """The output files' name: ``name`` or ``name_quick``."""
+    return name + ("_quick" if quick else "")
 
 
 def results_dir(path: str | os.PathLike | None = None) -> pathlib.Path:
@@ -72,6 +120,153 @@ def results_dir(path: str | os.PathLike | None = None) -> pathlib.Path:
     out = RESULTS if path is None else pathlib.Path(path)
     out.mkdir(parents=True, exist_ok=True)
     return out
+
+
+# --------------------------------------------------------------------------- problems
+
+
+@dataclass(frozen=True)
+class Problem:
+    """A benchmark problem: scene, initial state, horizon and its numpy equations."""
+
+    key: str
+    title: str
+    moments: tuple[float, float, float]  # central principal moments
+    omega0: tuple[float, float, float] | None = None  # body ω0 (free rotor)
+    euler0: tuple[float, float, float] | None = None  # ZXZ (φ, θ, ψ) (top)
+    rates0: tuple[float, float, float] | None = None  # (φ̇, θ̇, ψ̇) (top)
+    mass: float = 1.0
+    com: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    g: float = 0.0  # gravity along −z; > 0 means a pivoted top
+    t1: float = 100.0
+
+    @property
+    def pivoted(self) -> bool:
+        return self.g > 0
+
+    def scene(self):
+        """The :class:`jrigid.scene.Scene`: a free body, or a top on a pivot under gravity."""
+        import jax.numpy as jnp
+
+        from jrigid.body import RigidBody
+        from jrigid.scene import Gravity, Pivot, Scene
+
+        body = RigidBody(jnp.array(self.moments), self.mass, jnp.array(self.com))
+        if self.pivoted:
+            return Scene(body, Pivot(), (Gravity(self.g),))
+        return Scene(body)
+
+    def state(self):
+        """The initial :class:`jrigid.state.State`: the top from its Euler angles and rates;
+        the free body turned so that its angular momentum points along space z."""
+        import jax.numpy as jnp
+
+        from jrigid import quaternion as quat
+        from jrigid.initial import from_euler_rates, from_omega
+
+        if self.pivoted:
+            return from_euler_rates(jnp.array(self.euler0), jnp.array(self.rates0))
+        omega = jnp.array(self.omega0)
+        L = jnp.array(self.moments) * omega
+        # Orient the body so that L points along space z, then turn about z by 0.7 rad.
+        q_align = _shortest_arc(np.asarray(L) / float(jnp.linalg.norm(L)), np.array([0, 0, 1.0]))
+        q0 = quat.multiply(quat.from_axis_angle(jnp.array([0.0, 0.0, 1.0]), 0.7), q_align)
+        return from_omega(q0, omega)
+
+    def y0(self) -> np.ndarray:
+        """``(7,)`` initial ``(q, ω)`` for the numpy right-hand side."""
+        state = self.state()
+        return np.concatenate([np.asarray(state.q), np.asarray(state.omega)])
+
+    def support_moments(self) -> tuple[float, float, float]:
+        """Principal moments about the support point (parallel axis; ``com`` on an axis)."""
+        r = np.asarray(self.com, float)
+        if np.count_nonzero(r) > 1:
+            raise ValueError("the numpy equations assume the centre of mass on a principal axis")
+        shift = self.mass * (r @ r - r * r) if self.pivoted else np.zeros(3)
+        return tuple(float(x) for x in np.asarray(self.moments) + shift)
+
+    def jax_rhs(self):
+        """``f(t, y, args)`` for diffrax on a flat ``y = (q (4), ω (3))``: what a user would
+        write by hand for :func:`diffrax.diffeqsolve` (same equations as :meth:`numpy_rhs`)."""
+        import jax.numpy as jnp
+
+        J1, J2, J3 = self.support_moments()
+        a1, a2, a3 = (J2 - J3) / J1, (J3 - J1) / J2, (J1 - J2) / J3
+        r1, r2, r3 = (float(x) for x in self.com)
+        mg = self.mass * self.g if self.pivoted else 0.0
+
+        def rhs(t, y, args):
+            q0, q1, q2, q3, w1, w2, w3 = (y[i] for i in range(7))
+            s = -mg / (q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+            f1 = 2.0 * s * (q1 * q3 - q0 * q2)
+            f2 = 2.0 * s * (q2 * q3 + q0 * q1)
+            f3 = s * (q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3)
+            return jnp.stack([
+                0.5 * (-q1 * w1 - q2 * w2 - q3 * w3),
+                0.5 * (q0 * w1 + q2 * w3 - q3 * w2),
+                0.5 * (q0 * w2 + q3 * w1 - q1 * w3),
+                0.5 * (q0 * w3 + q1 * w2 - q2 * w1),
+                (r2 * f3 - r3 * f2) / J1 + a1 * w2 * w3,
+                (r3 * f1 - r1 * f3) / J2 + a2 * w3 * w1,
+                (r1 * f2 - r2 * f1) / J3 + a3 * w1 * w2,
+            ])
+
+        return rhs
+
+    def numpy_rhs(self):
+        """``f(t, y)`` for scipy: ``y = (q (4), ω (3))``, Euler's equations + (17.44)."""
+        J1, J2, J3 = self.support_moments()
+        a1, a2, a3 = (J2 - J3) / J1, (J3 - J1) / J2, (J1 - J2) / J3
+        if not self.pivoted:
+
+            def rhs(t, y):
+                q0, q1, q2, q3, w1, w2, w3 = y.tolist()
+                return np.array(
+                    [
+                        0.5 * (-q1 * w1 - q2 * w2 - q3 * w3),
+                        0.5 * (q0 * w1 + q2 * w3 - q3 * w2),
+                        0.5 * (q0 * w2 + q3 * w1 - q1 * w3),
+                        0.5 * (q0 * w3 + q1 * w2 - q2 * w1),
+                        a1 * w2 * w3,
+                        a2 * w3 * w1,
+                        a3 * w1 * w2,
+                    ]
+                )
+
+            return rhs
+
+        r1, r2, r3 = (float(x) for x in self.com)
+        mg = self.mass * self.g
+
+        def rhs(t, y):
+            q0, q1, q2, q3, w1, w2, w3 = y.tolist()
+            # Body-frame weight M Rᵀ (0, 0, −g) with R the rotation of q/|q|.
+            s = -mg / (q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+            f1 = 2.0 * s * (q1 * q3 - q0 * q2)
+            f2 = 2.0 * s * (q2 * q3 + q0 * q1)
+            f3 = s * (q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3)
+            return np.array(
+                [
+                    0.5 * (-q1 * w1 - q2 * w2 - q3 * w3),
+                    0.5 * (q0 * w1 + q2 * w3 - q3 * w2),
+                    0.5 * (q0 * w2 + q3 * w1 - q1 * w3),
+                    0.5 * (q0 * w3 + q1 * w2 - q2 * w1),
+                    (r2 * f3 - r3 * f2) / J1 + a1 * w2 * w3,
+                    (r3 * f1 - r1 * f3) / J2 + a2 * w3 * w1,
+                    (r1 * f2 - r2 * f1) / J3 + a3 * w1 * w2,
+                ]
+            )
+
+        return rhs
+
+
+def _shortest_arc(a: np.ndarray, b: np.ndarray):
+    """Unit quaternion rotating unit vector ``a`` onto unit vector ``b`` (not antiparallel)."""
+    import jax.numpy as jnp
+
+    q = np.concatenate([[1.0 + a @ b], np.cross(a, b)])
+    return jnp.asarray(q / np.linalg.norm(q))
 
 
 # --------------------------------------------------------------------------- machine

@@ -31,7 +31,6 @@ Writes ``benchmarks/results/lockstep[_quick].json`` and ``.md``.
 
 from __future__ import annotations
 
-import argparse
 import math
 import pathlib
 import sys
@@ -141,13 +140,11 @@ def measure(member, omega0, moments, t_end, chunk, sizes, seed=0) -> dict:
 
 
 def main(argv=None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true")
+    parser = harness.command_line(__doc__, quick="10³ directions over 10 periods, chunks of 128")
     parser.add_argument("--n", type=int, default=None, help="directions (default 10⁴)")
     parser.add_argument("--periods", type=float, default=None)
     parser.add_argument("--rtol", type=float, default=1e-8)
     parser.add_argument("--chunk", type=int, default=None, help="chunk size of the timed runs")
-    parser.add_argument("--out", default=None)
     args = parser.parse_args(argv)
     n = args.n or (1000 if args.quick else 10_000)
     periods = args.periods or (10.0 if args.quick else 50.0)
@@ -207,7 +204,7 @@ def main(argv=None) -> dict:
         ]
     text = harness.machine_line(out["machine"]) + "\n\n" + "\n".join(lines)
     print(text)
-    name = "lockstep_quick" if args.quick else "lockstep"
+    name = harness.stem("lockstep", args.quick)
     folder = harness.results_dir(args.out)
     path = harness.write_json(folder / f"{name}.json", out)
     harness.write_text(folder / f"{name}.md", text + "\n")

@@ -50,13 +50,11 @@ Writes ``speed_vs_error[_quick].json`` (raw numbers), ``.md`` (tables) and ``.pn
 
 from __future__ import annotations
 
-import argparse
 import math
 import pathlib
 import sys
 import time
 import warnings
-from dataclasses import dataclass
 
 import diffrax
 import jax
@@ -69,12 +67,9 @@ jax.config.update("jax_enable_x64", True)
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 
 import harness  # noqa: E402
+from harness import Problem  # noqa: E402
 
-from jrigid import quaternion as quat  # noqa: E402
-from jrigid.body import RigidBody  # noqa: E402
-from jrigid.initial import from_euler_rates, from_omega  # noqa: E402
 from jrigid.integrate import DEFAULT_SOLVER, simulate  # noqa: E402
-from jrigid.scene import Gravity, Pivot, Scene  # noqa: E402
 from jrigid.solvers import FusedDopri8, FusedTsit5  # noqa: E402
 
 TARGETS = (1e-4, 1e-6, 1e-8, 1e-10)
@@ -89,133 +84,6 @@ MIN_TIME = 0.15  # seconds of timed calls per point at least (more repeats for f
 
 
 # --------------------------------------------------------------------------- problems
-
-
-@dataclass(frozen=True)
-class Problem:
-    """A benchmark problem: scene, initial state, horizon and its numpy equations."""
-
-    key: str
-    title: str
-    moments: tuple[float, float, float]  # central principal moments
-    omega0: tuple[float, float, float] | None = None  # body ω0 (free rotor)
-    euler0: tuple[float, float, float] | None = None  # ZXZ (φ, θ, ψ) (top)
-    rates0: tuple[float, float, float] | None = None  # (φ̇, θ̇, ψ̇) (top)
-    mass: float = 1.0
-    com: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    g: float = 0.0  # gravity along −z; > 0 means a pivoted top
-    t1: float = 100.0
-
-    @property
-    def pivoted(self) -> bool:
-        return self.g > 0
-
-    def scene(self) -> Scene:
-        body = RigidBody(jnp.array(self.moments), self.mass, jnp.array(self.com))
-        if self.pivoted:
-            return Scene(body, Pivot(), (Gravity(self.g),))
-        return Scene(body)
-
-    def state(self):
-        if self.pivoted:
-            return from_euler_rates(jnp.array(self.euler0), jnp.array(self.rates0))
-        omega = jnp.array(self.omega0)
-        L = jnp.array(self.moments) * omega
-        # Orient the body so that L points along space z, then turn about z by 0.7 rad.
-        q_align = _shortest_arc(np.asarray(L) / float(jnp.linalg.norm(L)), np.array([0, 0, 1.0]))
-        q0 = quat.multiply(quat.from_axis_angle(jnp.array([0.0, 0.0, 1.0]), 0.7), q_align)
-        return from_omega(q0, omega)
-
-    def y0(self) -> np.ndarray:
-        """``(7,)`` initial ``(q, ω)`` for the numpy right-hand side."""
-        state = self.state()
-        return np.concatenate([np.asarray(state.q), np.asarray(state.omega)])
-
-    def support_moments(self) -> tuple[float, float, float]:
-        """Principal moments about the support point (parallel axis; ``com`` on an axis)."""
-        r = np.asarray(self.com, float)
-        if np.count_nonzero(r) > 1:
-            raise ValueError("the numpy equations assume the centre of mass on a principal axis")
-        shift = self.mass * (r @ r - r * r) if self.pivoted else np.zeros(3)
-        return tuple(float(x) for x in np.asarray(self.moments) + shift)
-
-    def jax_rhs(self):
-        """``f(t, y, args)`` for diffrax on a flat ``y = (q (4), ω (3))``: what a user would
-        write by hand for :func:`diffrax.diffeqsolve` (same equations as :meth:`numpy_rhs`)."""
-        J1, J2, J3 = self.support_moments()
-        a1, a2, a3 = (J2 - J3) / J1, (J3 - J1) / J2, (J1 - J2) / J3
-        r1, r2, r3 = (float(x) for x in self.com)
-        mg = self.mass * self.g if self.pivoted else 0.0
-
-        def rhs(t, y, args):
-            q0, q1, q2, q3, w1, w2, w3 = (y[i] for i in range(7))
-            s = -mg / (q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
-            f1 = 2.0 * s * (q1 * q3 - q0 * q2)
-            f2 = 2.0 * s * (q2 * q3 + q0 * q1)
-            f3 = s * (q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3)
-            return jnp.stack([
-                0.5 * (-q1 * w1 - q2 * w2 - q3 * w3),
-                0.5 * (q0 * w1 + q2 * w3 - q3 * w2),
-                0.5 * (q0 * w2 + q3 * w1 - q1 * w3),
-                0.5 * (q0 * w3 + q1 * w2 - q2 * w1),
-                (r2 * f3 - r3 * f2) / J1 + a1 * w2 * w3,
-                (r3 * f1 - r1 * f3) / J2 + a2 * w3 * w1,
-                (r1 * f2 - r2 * f1) / J3 + a3 * w1 * w2,
-            ])
-
-        return rhs
-
-    def numpy_rhs(self):
-        """``f(t, y)`` for scipy: ``y = (q (4), ω (3))``, Euler's equations + (17.44)."""
-        J1, J2, J3 = self.support_moments()
-        a1, a2, a3 = (J2 - J3) / J1, (J3 - J1) / J2, (J1 - J2) / J3
-        if not self.pivoted:
-
-            def rhs(t, y):
-                q0, q1, q2, q3, w1, w2, w3 = y.tolist()
-                return np.array(
-                    [
-                        0.5 * (-q1 * w1 - q2 * w2 - q3 * w3),
-                        0.5 * (q0 * w1 + q2 * w3 - q3 * w2),
-                        0.5 * (q0 * w2 + q3 * w1 - q1 * w3),
-                        0.5 * (q0 * w3 + q1 * w2 - q2 * w1),
-                        a1 * w2 * w3,
-                        a2 * w3 * w1,
-                        a3 * w1 * w2,
-                    ]
-                )
-
-            return rhs
-
-        r1, r2, r3 = (float(x) for x in self.com)
-        mg = self.mass * self.g
-
-        def rhs(t, y):
-            q0, q1, q2, q3, w1, w2, w3 = y.tolist()
-            # Body-frame weight M Rᵀ (0, 0, −g) with R the rotation of q/|q|.
-            s = -mg / (q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
-            f1 = 2.0 * s * (q1 * q3 - q0 * q2)
-            f2 = 2.0 * s * (q2 * q3 + q0 * q1)
-            f3 = s * (q0 * q0 - q1 * q1 - q2 * q2 + q3 * q3)
-            return np.array(
-                [
-                    0.5 * (-q1 * w1 - q2 * w2 - q3 * w3),
-                    0.5 * (q0 * w1 + q2 * w3 - q3 * w2),
-                    0.5 * (q0 * w2 + q3 * w1 - q1 * w3),
-                    0.5 * (q0 * w3 + q1 * w2 - q2 * w1),
-                    (r2 * f3 - r3 * f2) / J1 + a1 * w2 * w3,
-                    (r3 * f1 - r1 * f3) / J2 + a2 * w3 * w1,
-                    (r1 * f2 - r2 * f1) / J3 + a3 * w1 * w2,
-                ]
-            )
-
-        return rhs
-
-
-def _shortest_arc(a: np.ndarray, b: np.ndarray) -> jax.Array:
-    """Unit quaternion rotating unit vector ``a`` onto unit vector ``b`` (not antiparallel)."""
-    q = np.concatenate([[1.0 + a @ b], np.cross(a, b)])
-    return jnp.asarray(q / np.linalg.norm(q))
 
 
 FREE_ROTOR = Problem(
@@ -918,13 +786,11 @@ def _why(res: dict) -> list[str]:
 
 
 def main(argv: list[str] | None = None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--quick", action="store_true", help="free rotor, default vs scipy, < 40 s")
-    parser.add_argument("--out", default=None, help="output directory (default benchmarks/results)")
-    parser.add_argument("--quiet", action="store_true", help="print only the final tables")
+    parser = harness.command_line(__doc__, quick="free rotor, default vs scipy, < 40 s",
+                                  quiet=True)
     args = parser.parse_args(argv)
     start = time.perf_counter()
-    log = (lambda *a: None) if args.quiet else (lambda *a: print(*a, flush=True))
+    log = harness.logger(args.quiet)
     machine = harness.machine_info()
     log(harness.machine_line(machine))
     if args.quick:
@@ -946,7 +812,7 @@ def main(argv: list[str] | None = None) -> dict:
     machine["load_average_end"] = harness.machine_info()["load_average"]
 
     out_dir = harness.results_dir(args.out)
-    stem = "speed_vs_error" + ("_quick" if args.quick else "")
+    stem = harness.stem("speed_vs_error", args.quick)
     text = report(results, machine, quick=args.quick, tolerances=tolerances, seconds=seconds)
     harness.write_text(out_dir / f"{stem}.md", text)
     harness.write_json(out_dir / f"{stem}.json", {

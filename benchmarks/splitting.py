@@ -31,7 +31,6 @@ Writes ``splitting[_quick].json`` and ``.md`` to ``benchmarks/results/`` (or ``-
 
 from __future__ import annotations
 
-import argparse
 import math
 import pathlib
 import sys
@@ -49,7 +48,6 @@ jax.config.update("jax_enable_x64", True)
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 
 import harness  # noqa: E402
-import speed_vs_error as sve  # noqa: E402
 
 from jrigid import lagrange_top  # noqa: E402
 from jrigid import quaternion as quat  # noqa: E402
@@ -69,9 +67,9 @@ DRIFT_H = 0.01
 DRIFT_RTOL = 1e-8
 # A symmetric top (the closed form applies) and an asymmetric one (moments about the pivot
 # (1.25, 1.75, 2): only the energy and L·ĝ are conserved), both released with a spin.
-SYMMETRIC = sve.Problem("symmetric", "symmetric top", (1.0, 1.0, 1.5), euler0=(0.0, 0.5, 0.0),
+SYMMETRIC = harness.Problem("symmetric", "symmetric top", (1.0, 1.0, 1.5), euler0=(0.0, 0.5, 0.0),
                         rates0=(0.0, 0.0, 4.0), com=(0.0, 0.0, 1.0), g=1.0, t1=ORDER_T)
-ASYMMETRIC = sve.Problem("asymmetric", "asymmetric top", (1.0, 1.5, 2.0),
+ASYMMETRIC = harness.Problem("asymmetric", "asymmetric top", (1.0, 1.5, 2.0),
                          euler0=(0.0, 0.5, 0.0), rates0=(0.3, 0.0, 3.0), com=(0.0, 0.0, 0.5),
                          g=1.0)
 
@@ -80,7 +78,7 @@ def _final_error(q, w, q_ref, w_ref) -> float:
     return max(harness.omega_error(w, w_ref), harness.quaternion_error(q, q_ref))
 
 
-def _closed_form(problem: sve.Problem, ts):
+def _closed_form(problem: harness.Problem, ts):
     """``jrigid.lagrange_top.solve`` for the problem's scene and state at ``ts``."""
     scene, state = problem.scene(), problem.state()
     b = scene.body
@@ -88,7 +86,7 @@ def _closed_form(problem: sve.Problem, ts):
                               state.q, state.omega, jnp.asarray(ts))
 
 
-def _dop853(problem: sve.Problem, ts, rtol: float):
+def _dop853(problem: harness.Problem, ts, rtol: float):
     """scipy DOP853 on the problem's numpy (q, ω) equations: ``(q, ω, seconds, nfev)``."""
     start = time.perf_counter()
     with warnings.catch_warnings():
@@ -215,9 +213,7 @@ def report(res: dict, machine: dict) -> str:
 
 
 def main(argv: list[str] | None = None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--quick", action="store_true", help="10⁵ steps in part 2, ~1 min")
-    parser.add_argument("--out", default=None, help="output directory (default benchmarks/results)")
+    parser = harness.command_line(__doc__, quick="10⁵ steps in part 2, ~1 min")
     args = parser.parse_args(argv)
     machine = harness.machine_info()
     start = time.perf_counter()
@@ -226,7 +222,7 @@ def main(argv: list[str] | None = None) -> dict:
     res["total_seconds"] = time.perf_counter() - start
     text = report(res, machine)
     out_dir = harness.results_dir(args.out)
-    stem = "splitting" + ("_quick" if args.quick else "")
+    stem = harness.stem("splitting", args.quick)
     harness.write_text(out_dir / f"{stem}.md", text)
     harness.write_json(out_dir / f"{stem}.json", {"machine": machine, **res})
     print(text)

@@ -55,7 +55,6 @@ and with ``--figure PATH`` a summary figure of four cases (the README's).
 
 from __future__ import annotations
 
-import argparse
 import math
 import pathlib
 import sys
@@ -76,6 +75,7 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import hard_cases as hc  # noqa: E402
 import harness  # noqa: E402
 
+from jrigid.formulations import FORMULATIONS  # noqa: E402  (every formulation, by name)
 from jrigid.integrate import simulate  # noqa: E402
 from jrigid.leapfrog import leapfrog  # noqa: E402
 from jrigid.splitting import Splitting  # noqa: E402
@@ -85,7 +85,6 @@ TARGETS = (1e-4, 1e-8)
 TARGETS_F32 = (1e-2, 1e-4)
 DEFAULT = "jrigid default"  # simulate(scene, state, ts, rtol=…): no other option
 OLD_DEFAULT = "jrigid quaternion_acceleration + Tsit5"  # 0.1's default (|q| projection only)
-FORMULATIONS = ("quaternion_acceleration", "quaternion_omega", "body_omega", "euler_angles")
 SOLVERS = {"Tsit5": diffrax.Tsit5, "Dopri5": diffrax.Dopri5, "Dopri8": diffrax.Dopri8,
            "Kvaerno5": diffrax.Kvaerno5}
 TOLS = (1e-3, 1e-5, 1e-7, 1e-9, 1e-12)
@@ -597,7 +596,7 @@ def published_check(case: hc.Case) -> dict:
                 "max_error_vs_jrigid_special": float(np.max(np.abs(y - hc.b5_exact(ts)))),
                 "max_error_vs_scipy_ellipj": float(np.max(np.abs(
                     y - np.stack([sn, cn, dn], axis=-1))))}
-    _, coeffs, y0 = hc._published("HNW")
+    _, coeffs, y0 = hc.published("HNW")
     sol = solve_ivp(hc.published_rhs(coeffs), (0.0, 20.0), y0, method="DOP853", rtol=1e-10,
                     atol=1e-12, t_eval=ts)
     inv0 = hc.hnw_invariants(y0)
@@ -845,15 +844,13 @@ def panels_of(results) -> dict:
 
 
 def main(argv: list[str] | None = None) -> dict:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--quick", action="store_true", help="three cases at small size, ~1 min")
-    parser.add_argument("--out", default=None, help="output directory (default benchmarks/results)")
+    parser = harness.command_line(__doc__, quick="three cases at small size, ~1 min",
+                                  quiet=True)
     parser.add_argument("--cases", default=None, help="comma-separated case keys (default all)")
     parser.add_argument("--figure", default=None, help="also write the summary figure here")
-    parser.add_argument("--quiet", action="store_true", help="print only the final tables")
     args = parser.parse_args(argv)
     start = time.perf_counter()
-    log = (lambda *a: None) if args.quiet else (lambda *a: print(*a, flush=True))
+    log = harness.logger(args.quiet)
     machine = harness.machine_info()
     log(harness.machine_line(machine))
     keys = args.cases.split(",") if args.cases else (QUICK_CASES if args.quick else FULL_CASES)
@@ -866,7 +863,7 @@ def main(argv: list[str] | None = None) -> dict:
     machine["load_average_end"] = harness.machine_info()["load_average"]
 
     out_dir = harness.results_dir(args.out)
-    stem = "work_precision" + ("_quick" if args.quick else "")
+    stem = harness.stem("work_precision", args.quick)
     text = report(results, machine, cache, gimbal, quick=args.quick, seconds=seconds)
     harness.write_text(out_dir / f"{stem}.md", text)
     harness.write_json(out_dir / f"{stem}.json", {

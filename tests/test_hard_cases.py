@@ -266,7 +266,7 @@ def test_gimbal_lock_reported_by_euler_angles_only():
 @pytest.mark.parametrize("key", ["detest_b5", "hairer_rigid_body"])
 def test_published_equations_are_euler_equations_scaled(key):
     case = hc.CASES[key]
-    body, coeffs, y0 = hc._published(case.published)
+    body, coeffs, y0 = hc.published(case.published)
     d = hc.published_map(case)
     assert case.moments == body
     np.testing.assert_allclose(case.omega0, d * np.asarray(y0), rtol=1e-15)
