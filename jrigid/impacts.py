@@ -1,0 +1,198 @@
+"""The mechanics of one impact: contact points, the collision matrix, the impulse.
+
+Pure functions of one body's state (``jit``/``vmap``/``grad``-able, no checks), used by
+:func:`jrigid.contact.simulate_bounces` at every contact.
+
+**Impulse model** (space frame; ``r`` from the centre of mass to the contact point,
+``n = e_z`` the floor normal, ``u = v + ω_s × r`` the velocity of the contact point).
+An impulse ``P`` at ``r`` changes ``v`` by ``P/M`` and ``ω_s`` by ``I_s⁻¹ (r × P)``, hence
+``Δu = K P`` with the collision matrix ``K = 1/M − [r]× I_s⁻¹ [r]×`` (``I_s = R I Rᵀ``).
+Newton's restitution asks ``u_n⁺ = −e u_n⁻``. With Coulomb friction coefficient ``μ``
+the impulse is first sought with sticking, ``u_t⁺ = 0``: ``P = K⁻¹(−(1+e) u_n n − u_t)``;
+if it lies in the friction cone ``|P_t| ≤ μ P_n`` it is taken. Otherwise the contact
+slides: ``P = P_n (n + μ t̂)`` along the tangential direction ``t̂`` of the sticking impulse
+(the direction friction would push to stop the slip, i.e. the sliding impulse never
+reverses the tangential velocity), with ``P_n = −(1+e) u_n / (n·K(n + μ t̂))`` from
+the restitution condition. (In 3D the slip direction may turn during a real impact;
+taking it once, from the sticking impulse, is the usual algebraic simplification. With
+friction, Newton's restitution can in rare configurations return a little energy
+(Kane's paradox): :func:`jrigid.contact.simulate_bounces` records the energy at every contact.)
+Frictionless (``μ = 0``): ``P = m_eff (1+e) |u_n| n`` with
+``m_eff = 1/(n·K n)``, and the kinetic energy drops by ``(1 − e²) ½ m_eff u_n²`` (zero
+for ``e = 1``). Every impulse at a point conserves the angular momentum about that
+point and changes the linear momentum by ``P``.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.typing import ArrayLike
+
+from jrigid import linalg
+from jrigid import quaternion as quat
+from jrigid._checks import as_float
+
+__all__ = [
+    "apply_impulse",
+    "box_corners",
+    "collision_matrix",
+    "contact_impulse",
+    "effective_mass",
+    "point_positions",
+    "point_velocities",
+]
+
+
+# --------------------------------------------------------------------------- geometry
+
+
+def box_corners(size: ArrayLike, planar: bool = False) -> jax.Array:
+    """Corners of a box centred on its centre of mass, body frame.
+
+    Args:
+        size: ``(3,)`` full side lengths ``(a, b, c)`` along body ``x, y, z``.
+        planar: static; if true return the 4 corners of the ``a × c`` rectangle in the
+            plane ``y = 0`` (midpoints of the edges along ``y``), the contact points of a
+            box moving in the ``xz`` plane and turning about ``y``.
+
+    Returns:
+        ``(8, 3)`` (or ``(4, 3)`` if ``planar``) points ``(±a/2, ±b/2, ±c/2)``.
+    """
+    half = 0.5 * as_float(size)
+    signs = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float)
+    if planar:
+        signs = np.array([[i, 0, k] for i in (-1, 1) for k in (-1, 1)], float)
+    return jnp.asarray(signs, dtype=half.dtype) * half[None, :]
+
+
+def point_positions(q: ArrayLike, x: ArrayLike, points: ArrayLike) -> jax.Array:
+    """Space positions ``x + R(q) p`` of body-frame points.
+
+    Args:
+        q: ``(4,)`` unit orientation (body → space).
+        x: ``(3,)`` centre of mass.
+        points: ``(K, 3)`` body-frame points relative to the centre of mass.
+
+    Returns:
+        ``(K, 3)``.
+    """
+    return jnp.asarray(x)[None, :] + quat.rotate(jnp.asarray(q)[None, :], points)
+
+
+def point_velocities(q: ArrayLike, omega: ArrayLike, v: ArrayLike, points: ArrayLike) -> jax.Array:
+    """Space velocities ``v + ω_s × (R p)`` of body-frame points.
+
+    Args:
+        q: ``(4,)`` unit orientation.
+        omega: ``(3,)`` body angular velocity.
+        v: ``(3,)`` centre-of-mass velocity.
+        points: ``(K, 3)`` body-frame points.
+
+    Returns:
+        ``(K, 3)``.
+    """
+    q = jnp.asarray(q)
+    r = quat.rotate(q[None, :], points)
+    w = quat.rotate(q, omega)
+    return jnp.asarray(v)[None, :] + jnp.cross(jnp.broadcast_to(w, r.shape), r)
+
+
+# --------------------------------------------------------------------------- impulses
+
+
+def _skew(r: jax.Array) -> jax.Array:
+    z = jnp.zeros((), r.dtype)
+    return jnp.array([[z, -r[2], r[1]], [r[2], z, -r[0]], [-r[1], r[0], z]])
+
+
+def _inverse_inertia_space(moments: jax.Array, q: jax.Array) -> jax.Array:
+    R = quat.to_matrix(q)
+    return (R / moments[None, :]) @ R.T
+
+
+def collision_matrix(mass, moments, q, r) -> jax.Array:
+    """``K = 1/M − [r]× I_s⁻¹ [r]×``: contact-point velocity change per unit impulse.
+
+    Args:
+        mass: ``()`` mass ``M``.
+        moments: ``(3,)`` principal moments about the centre of mass.
+        q: ``(4,)`` unit orientation (principal body frame → space).
+        r: ``(3,)`` contact point relative to the centre of mass, space frame.
+
+    Returns:
+        ``(3, 3)`` symmetric positive definite ``K`` with ``Δu = K P``.
+    """
+    S = _skew(as_float(r))
+    eye = jnp.eye(3, dtype=S.dtype)
+    return eye / mass - S @ _inverse_inertia_space(as_float(moments), as_float(q)) @ S
+
+
+def effective_mass(mass, moments, q, r, normal) -> jax.Array:
+    """``m_eff = 1 / (n·K n)``, the mass the floor feels at the contact point.
+
+    ``1/m_eff = 1/M + (r × n)·I_s⁻¹ (r × n)``: ``M`` for a contact below the centre of
+    mass, ``M/4`` for a thin rod (``I = M ℓ²/12``) touching with one end while level.
+
+    Args:
+        mass, moments, q, r: as :func:`collision_matrix`.
+        normal: ``(3,)`` unit normal.
+
+    Returns:
+        ``()``.
+    """
+    n = as_float(normal)
+    return 1.0 / jnp.dot(n, collision_matrix(mass, moments, q, r) @ n)
+
+
+def contact_impulse(mass, moments, q, v, omega, r, normal, restitution, friction) -> jax.Array:
+    """Impulse at a contact point: Newton restitution plus Coulomb friction with sticking.
+
+    See the module docstring for the model. Zero if the point is separating (``u_n ≥ 0``).
+
+    Args:
+        mass: ``()`` mass.
+        moments: ``(3,)`` principal moments about the centre of mass.
+        q: ``(4,)`` unit orientation.
+        v: ``(3,)`` centre-of-mass velocity (space).
+        omega: ``(3,)`` body angular velocity.
+        r: ``(3,)`` contact point relative to the centre of mass, space frame.
+        normal: ``(3,)`` unit normal, pointing out of the floor.
+        restitution: ``()`` ``e`` in ``[0, 1]``.
+        friction: ``()`` ``μ ≥ 0``.
+
+    Returns:
+        ``(3,)`` impulse on the body, space frame (batch with ``jax.vmap``).
+    """
+    q, v, omega, r, n = (as_float(a) for a in (q, v, omega, r, normal))
+    K = collision_matrix(mass, moments, q, r)
+    u = v + jnp.cross(quat.rotate(q, omega), r)
+    un = jnp.dot(u, n)
+    ut = u - un * n
+    stick = linalg.solve3(K, -(1.0 + restitution) * un * n - ut)
+    pn = jnp.dot(stick, n)
+    pt = stick - pn * n
+    pt2 = jnp.dot(pt, pt)
+    nonzero = pt2 > 0
+    t_hat = pt / jnp.sqrt(jnp.where(nonzero, pt2, 1.0))  # double where: finite gradients
+    d = n + friction * t_hat
+    slide = (-(1.0 + restitution) * un / jnp.dot(n, K @ d)) * d
+    inside = jnp.sqrt(jnp.where(nonzero, pt2, 0.0)) <= friction * pn
+    P = jnp.where(inside, stick, slide)
+    return jnp.where(un < 0, P, jnp.zeros_like(P))
+
+
+def apply_impulse(mass, moments, q, v, omega, r, impulse) -> tuple[jax.Array, jax.Array]:
+    """Velocities after an impulse ``P`` at ``r``: ``v + P/M``, ``ω + I⁻¹ Rᵀ(r × P)``.
+
+    Args:
+        mass, moments, q, v, omega, r: as :func:`contact_impulse`.
+        impulse: ``(3,)`` impulse, space frame.
+
+    Returns:
+        ``(v (3,), ω (3,) body frame)``.
+    """
+    q, v, omega, r, impulse = (as_float(a) for a in (q, v, omega, r, impulse))
+    dL_body = quat.rotate_inverse(q, jnp.cross(r, impulse))
+    return v + impulse / mass, omega + dL_body / moments
