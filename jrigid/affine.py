@@ -282,6 +282,19 @@ def compose(*transforms) -> jax.Array:
 
     Returns:
         ``(..., n+1, n+1)``.
+
+    Example:
+        Turn a quarter about the origin, then move one unit along ``x``: the point
+        ``(1, 0)`` lands on ``(1, 1)``, while the vector ``(1, 0)`` only turns:
+
+        >>> import jax.numpy as jnp
+        >>> from jrigid import affine
+        >>> T = affine.compose(affine.translation(jnp.array([1.0, 0.0])),
+        ...                    affine.rotation_2d(jnp.pi / 2))
+        >>> print(jnp.round(affine.apply_to_points(T, jnp.array([1.0, 0.0])), 6) + 0.0)
+        [1. 1.]
+        >>> print(jnp.round(affine.apply_to_vectors(T, jnp.array([1.0, 0.0])), 6) + 0.0)
+        [0. 1.]
     """
     if not transforms:
         raise ValueError("compose needs at least one transform")

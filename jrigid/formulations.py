@@ -20,13 +20,13 @@ Every formulation turns the user's :class:`~jrigid.state.State` into its own var
 ``|q|² = 1, q·q̇ = 0`` is invariant: with ``e = |q|² − 1`` and ``c = q·q̇`` the exact
 flow gives ``ė = 2c``, ``ċ = −|q̇|² e``, a neutral oscillation, so numerical errors
 accumulate. Two remedies: projection after each step (:meth:`AbstractFormulation.project`,
-used by :func:`jrigid.simulate` through :class:`jrigid.integrate.ProjectedSolver`) and the
+used by :func:`jrigid.simulate` through :class:`jrigid.solve.ProjectedSolver`) and the
 stabilising term ``−(2k c + ½ k² e) q / |q|²`` added to ``q̈`` (``stabilization = γ``,
 ``k = γ |ω|``), which turns the residual dynamics into
 ``ë + 2k ė + (k² + 2|q̇|²) e = 0``: a decay at rate ``k`` without stiffness. The term
 leaves ``vec(q* ⊗ q̇)`` alone, so as it pulls ``|q|`` back to one it rescales
-``ω = 2 vec(q* ⊗ q̇)/|q|²``: measured over long runs, the energy error grows by
-1.5–60× (see :mod:`jrigid.integrate`), which is why projection is the default.
+``ω = 2 vec(q* ⊗ q̇)/|q|²``, and over long runs the energy error grows (the README
+has the measurements), which is why projection is the default.
 
 **Euler angles.** Inverting (17.36): ``φ̇ = (ω1 sin ψ + ω2 cos ψ)/sin θ``,
 ``θ̇ = ω1 cos ψ − ω2 sin ψ``, ``ψ̇ = ω3 − φ̇ cos θ``. The rates blow up as

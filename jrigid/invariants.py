@@ -23,9 +23,8 @@ symmetric one spinning about an equatorial axis) the normal equations are regula
 row by row (:data:`RIDGE`) so that rounding is not amplified: without that the
 derivatives there were wrong by O(1). Near a sphere (moments a relative ``δ`` apart)
 the derivative of the energy-like invariant is a difference of O(1) terms over a
-gradient of size ``δ``, so derivatives carry an error of about ``eps / δ`` per step
-(measured against the exact solver at ``rtol = 1e-12``: 2e-10 at ``δ = 1e-6``, 7e-8 at
-``δ = 1e-9`` after five time units); ``project="manifold"`` does not have it.
+gradient of size ``δ``, so derivatives carry an error of about ``eps / δ`` per step;
+``project="manifold"`` does not have it.
 """
 
 from __future__ import annotations
