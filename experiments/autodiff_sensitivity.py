@@ -5,7 +5,7 @@ solver's derivative — and how the sensitivity grows near the separatrix.
 
 A free body with moments ``I = (1, 2, 2.5)`` starts spinning close to its intermediate axis,
 ``ω0 = (ε, 1, ε)``; it flips every ``T/2`` (``T`` the period of ω, which grows like
-``log(1/ε)``, :func:`jrigid.fit.free_rates`). How does the final orientation ``q(D)`` move
+``log(1/ε)``, :func:`jrigid.theory.free_rates`). How does the final orientation ``q(D)`` move
 when the moments change? Four ways to get the Jacobian ``∂q(D)/∂I`` (4 × 3):
 
 - **reverse mode**: ``jax.jacrev`` through :func:`jrigid.simulate` (Tsit5, adaptive), with
@@ -51,7 +51,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jrigid import exact, fit, initial, viz
+from jrigid import exact, initial, theory, viz
 from jrigid import quaternion as quat
 from jrigid.body import RigidBody
 from jrigid.integrate import simulate
@@ -168,7 +168,7 @@ def main(
     sweep = []
     for eps in eps_values:
         e = jnp.asarray(eps)
-        period = float(fit.free_rates(m, _omega0(e)).omega_period)
+        period = float(theory.free_rates(m, _omega0(e)).omega_period)
         d = jnp.asarray(1.25 * period)
         q = fns["primal"](m, e, d, jnp.asarray(fd_rtol))
         jac = {

@@ -7,7 +7,7 @@ principal axis in turn, with ``ω`` tilted by a small angle ``ε`` toward the ne
 (the ``body_omega`` formulation of :func:`jrigid.simulate`): there is no orientation, and the
 block is drawn fixed with the tips of ``ω`` and ``L`` tracing their body-frame paths (the
 polhodes). Checks that over two flip intervals of the intermediate axis
-(:func:`jrigid.demo.flip_theory`)
+(:func:`jrigid.theory.flip_interval`)
 
 * about axes 1 and 3 the angle between ``ω`` and the axis stays below a few ``ε``;
 * about axis 2 it exceeds 90°: ``ω`` turns over;
@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jrigid import demo, inertia, initial, viz
+from jrigid import inertia, initial, theory, viz
 from jrigid.body import RigidBody
 from jrigid.integrate import simulate
 from jrigid.report import Report
@@ -63,7 +63,7 @@ def main(
         raise ValueError(f"sides must give I1 < I2 < I3 (a > b > c), got moments {moments}")
     eps = np.radians(tilt_deg)
     w_mid = np.array([0.0, rate * np.cos(eps), rate * np.sin(eps)])
-    flip = demo.flip_theory(moments, w_mid)["flip_interval"]
+    flip = float(theory.flip_interval(moments, w_mid))
     ts = jnp.linspace(0.0, 2.2 * flip, n)
     scene = Scene(RigidBody(jnp.asarray(moments), mass))
     runs = []

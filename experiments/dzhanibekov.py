@@ -1,10 +1,10 @@
 """Dzhanibekov's T-handle: spun about its middle axis it flips periodically, every 2K(m)/λ.
 
-A T-handle (two solid cylinders, :func:`jrigid.demo.t_handle_moments`) spins about its
+A T-handle (two solid cylinders, :func:`jrigid.inertia.t_handle_moments`) spins about its
 intermediate principal axis with ``ω`` tilted by a small angle ``ε`` toward the axis of
 largest moment. Torque free, it turns over and back again and again. Euler's equations are
 solved by Jacobi elliptic functions; the intermediate component ``ω_B ∝ sn(λt + c | m)``
-changes sign every ``2K(m)/λ`` (:func:`jrigid.demo.flip_theory`). Checks that
+changes sign every ``2K(m)/λ`` (:func:`jrigid.theory.flip_theory`). Checks that
 
 * the mean spacing of the sign changes of ``ω_B`` in the simulation (:func:`jrigid.simulate`)
   equals ``2K/λ`` and half the period of the closed-form solution

@@ -3,8 +3,8 @@
 Eqs. 17.45–17.46 and Problem 17.4. A plate (radius ``r``, thickness ``h``) spins about its
 symmetry axis, tilted by ``θ`` from ``L``. Its axis wobbles about ``L`` at ``φ̇ = |L|/I1``
 while it spins at ``ψ̇ = ω3 (I1 − I3)/I1``: ``|φ̇/ψ̇| = 2/((1 − h²/3r²) cos θ)``, → 2 for a
-thin plate and small tilt (:func:`jrigid.demo.plate_theory`; measured by line fits,
-:func:`jrigid.demo.wobble_to_spin`). The plate is integrated by :func:`jrigid.simulate`
+thin plate and small tilt (:func:`jrigid.theory.plate_theory`; measured by line fits,
+:func:`jrigid.theory.wobble_to_spin`). The plate is integrated by :func:`jrigid.simulate`
 (adaptive Tsit5, via :func:`jrigid.demo.run_plate`) and by the chapter's leapfrog
 (:func:`jrigid.leapfrog.leapfrog`, both the literal listing, ``variant="chapter"``, and the
 midpoint form). Checks
@@ -31,13 +31,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jrigid import demo, inertia, initial, viz
+from jrigid import demo, inertia, initial, theory, viz
 from jrigid import quaternion as quat
 from jrigid.body import RigidBody
 from jrigid.integrate import simulate
 from jrigid.leapfrog import leapfrog
 from jrigid.report import Report
 from jrigid.scene import Scene
+
+
+def _floats(values: dict) -> dict:
+    """A :mod:`jrigid.theory` result as Python numbers."""
+    return {k: float(v) for k, v in values.items()}
 
 
 def _drift(x):
@@ -56,7 +61,7 @@ def _free(moments, omega0, span, n):
         atol=1e-12,
     )
     ang = viz.euler_about(tr.q, tr.L_space, axis=2)
-    return demo.wobble_to_spin(tr.ts, tr.q, tr.L_space), float(np.ptp(ang[:, 1]))
+    return _floats(theory.wobble_to_spin(tr.ts, tr.q, tr.L_space)), float(np.ptp(ang[:, 1]))
 
 
 def main(
@@ -109,7 +114,7 @@ def main(
             lf[variant, dt] = dict(
                 q_error=float(np.max(np.asarray(quat.distance(tr.q, tp.q)))),
                 energy_drift=_drift(tr.energy), L_drift=_drift(tr.L_space),
-                ratio=demo.wobble_to_spin(tr.ts, tr.q, tr.L_space)["ratio"])  # fmt: skip
+                ratio=float(theory.wobble_to_spin(tr.ts, tr.q, tr.L_space)["ratio"]))  # fmt: skip
     # the leapfrog cuts each output interval into ceil(Δ/dt) equal steps: fit the steps used
     gap = float(tp.ts[1] - tp.ts[0])
     steps = [gap / math.ceil(gap / dt) for dt in dts]
@@ -124,7 +129,7 @@ def main(
     tray_m, tray_nut = _free(tm, tray_w, wobbles * math.pi / w3, n)
     d = math.radians(diameter_tilt_deg)
     diam_w = w3 * np.array([math.cos(d), 0.0, math.sin(d)])
-    diam_th = demo.plate_theory(p["moments"], diam_w)
+    diam_th = _floats(theory.plate_theory(p["moments"], diam_w))
     diam_m, _ = _free(p["moments"], diam_w, wobbles * 2 * math.pi / diam_th["precession_rate"], n)
     plate_nut = float(np.ptp(viz.euler_about(tp.q, tp.L_space, axis=2)[:, 1]))
     mid, chap = lf["midpoint", dts[-1]], lf["chapter", dts[-1]]

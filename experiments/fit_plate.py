@@ -2,7 +2,7 @@
 
 A plate of radius ``r`` and thickness ``h`` (:func:`jrigid.inertia.disk`) tossed with its
 axis tilted by ``θ`` from ``L`` wobbles ``|φ̇/ψ̇| = 2/((1 − x²/3) cos θ)`` times as fast as
-it spins, ``x = h/r`` (:func:`jrigid.demo.plate_theory`). An observer measures the ratio
+it spins, ``x = h/r`` (:func:`jrigid.theory.plate_theory`). An observer measures the ratio
 (± ``σ_R``) and the tilt (± ``σ_θ``); the fit recovers ``x`` (a positive parameter,
 :func:`jrigid.fit.positive`) and ``θ`` through the closed-form features
 :class:`jrigid.fit.WobbleRatio` and :class:`jrigid.fit.Tilt` (forward model
@@ -31,7 +31,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jrigid import demo, fit, inertia, initial, viz
+from jrigid import fit, inertia, initial, theory, viz
 from jrigid.body import RigidBody
 from jrigid.report import Report
 from jrigid.scene import Scene
@@ -50,10 +50,10 @@ def build(theta):
 
 
 def ratio_theory(x: float, tilt: float) -> float:
-    """``|φ̇/ψ̇|`` of the plate from :func:`jrigid.demo.plate_theory` (independent of fit)."""
-    m = demo.plate_moments(1.0, 1.0, x)
+    """``|φ̇/ψ̇|`` of the plate from :func:`jrigid.theory.plate_theory` (independent of fit)."""
+    m = np.asarray(inertia.disk(1.0, 1.0, x), dtype=float)
     w = np.array([SPIN * math.tan(tilt) * m[2] / m[0], 0.0, SPIN])
-    return demo.plate_theory(m, w)["ratio"]
+    return float(theory.plate_theory(m, w)["ratio"])
 
 
 def sigma_theory(x: float, tilt: float, s_ratio: float, s_tilt: float) -> float:

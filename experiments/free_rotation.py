@@ -12,8 +12,8 @@ a sphere (``I1 = I2 = I3``) keeps any ``ω`` constant; and the model agrees with
 
 * the Feynman plate (Problem 17.4): the chapter's leapfrog (:func:`jrigid.leapfrog.leapfrog`)
   and this model give the same orientations (to the leapfrog's O(dt²)) and the same
-  wobble-to-spin ratio (:func:`jrigid.demo.wobble_to_spin`, theory
-  :func:`jrigid.demo.plate_theory`);
+  wobble-to-spin ratio (:func:`jrigid.theory.wobble_to_spin`, theory
+  :func:`jrigid.theory.plate_theory`);
 * the body-frame solution of Problem 17.3 (``body_omega``): the same ``ω(t)``.
 
 Run it with ``jrigid run free_rotation [--quick]``.
@@ -27,7 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jrigid import demo, inertia, initial, viz
+from jrigid import demo, inertia, initial, theory, viz
 from jrigid import quaternion as quat
 from jrigid.body import RigidBody
 from jrigid.integrate import simulate
@@ -74,7 +74,7 @@ def main(
     scene = Scene(RigidBody(jnp.asarray(moments)))
     eps = np.radians(tilt_deg)
     w_mid = np.array([0.0, rate * np.cos(eps), rate * np.sin(eps)])
-    ts = jnp.linspace(0.0, 2.2 * demo.flip_theory(moments, w_mid)["flip_interval"], n)
+    ts = jnp.linspace(0.0, 2.2 * float(theory.flip_interval(moments, w_mid)), n)
     steady_err, wander, perturbed = [], [], []
     for k in range(3):
         tr = simulate(scene, initial.tilted(k, 0.0, rate), ts)
@@ -93,7 +93,7 @@ def main(
     tp = p["traj"]
     lf = leapfrog(tp.scene, initial.from_omega(tp.q[0], jnp.asarray(p["omega0"])), tp.ts,
                   dt=leapfrog_dt)  # fmt: skip
-    lf_ratio = demo.wobble_to_spin(lf.ts, lf.q, lf.L_space)["ratio"]
+    lf_ratio = float(theory.wobble_to_spin(lf.ts, lf.q, lf.L_space)["ratio"])
     numbers = {
         "moments": moments,
         "steady_omega_max_error": steady_err,

@@ -33,7 +33,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jrigid import demo, inertia, initial, viz
+from jrigid import inertia, initial, theory, viz
 from jrigid.body import RigidBody
 from jrigid.integrate import simulate
 from jrigid.report import Report
@@ -47,14 +47,12 @@ def top(radius: float = 1.0, z0: float = 1.0, g: float = 1.0) -> Scene:
 
 
 def steady_roots(scene: Scene, theta, omega3):
-    """Exact slow and fast roots of ``I1 Ω² cos θ − I3 ω3 Ω + M g l = 0`` and (17.51)."""
+    """Exact slow and fast roots of ``I1 Ω² cos θ − I3 ω3 Ω + M g l = 0`` and (17.51)
+    (:func:`jrigid.theory.gyroscope_rates`), with ``I1``, ``I3`` and ``mgl``."""
     I1, I3 = float(scene.inertia()[0, 0]), float(scene.inertia()[2, 2])
     mgl = float(scene.body.mass * np.linalg.norm(scene.loads[0].g) * scene.body.com[2])
-    a, b = I1 * math.cos(theta), I3 * omega3
-    disc = math.sqrt(b * b - 4 * a * mgl)
-    slow = 2 * mgl / (b + disc)  # the small root, without cancellation
-    return dict(slow=slow, fast=(b + disc) / (2 * a), slow_approx=mgl / b,
-                fast_approx=b / a, I1=I1, I3=I3, mgl=mgl)  # fmt: skip
+    rates = theory.gyroscope_rates(I1, I3, mgl, theta, omega3)
+    return {**{k: float(v) for k, v in rates.items()}, "I1": I1, "I3": I3, "mgl": mgl}
 
 
 def run(scene, theta, omega3, phi_dot, span, n, **kw):
@@ -107,16 +105,17 @@ def main(
                          rate_approx=r[name + "_approx"], theta_ptp=float(np.ptp(th)),
                          energy_drift=float(np.ptp(E) / abs(E[0])),
                          Lz_drift=float(np.ptp(Lz) / abs(Lz[0])))  # fmt: skip
-    w_nut = r["I3"] * omega3 / r["I1"]
+    fast_top = theory.fast_top_nutation(r["I1"], r["I3"], r["mgl"], theta, omega3)
+    w_nut = float(fast_top["frequency"])
     traj, th, phi = run(scene, theta, omega3, 0.0, nutations * 2 * math.pi / w_nut, n)
     runs["released"] = (traj, th)
-    crossings = demo.zero_crossings(traj.ts, th - th.mean())
+    crossings = np.asarray(theory.zero_crossings(traj.ts, th - th.mean()))
     L3 = np.asarray(traj.L[:, 2])
     nut = dict(
         frequency_measured=float(math.pi / np.mean(np.diff(crossings))),
         frequency_fast_top=w_nut,
         dip_measured=float(th.max() - theta),
-        dip_fast_top=2 * r["mgl"] * r["I1"] * math.sin(theta) / (r["I3"] * omega3) ** 2,
+        dip_fast_top=float(fast_top["dip"]),
         mean_rate_measured=viz.fit_rate(traj.ts, phi),
         mean_rate_slow=r["slow"],
         energy_drift=float(np.ptp(np.asarray(traj.energy)) / abs(float(traj.energy[0]))),

@@ -32,7 +32,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jrigid import demo, initial, lagrange_top, viz
+from jrigid import initial, lagrange_top, theory, viz
 from jrigid import quaternion as quat
 from jrigid.integrate import simulate
 from jrigid.report import Report
@@ -148,7 +148,7 @@ def main(
     th_an = np.arccos(np.clip(axle[:, 2], -1.0, 1.0))
     t_np = np.asarray(ts)
     mid = 0.5 * (math.acos(u1) + math.acos(u2))
-    crossings = demo.zero_crossings(t_np, th_int - mid)
+    crossings = np.asarray(theory.zero_crossings(t_np, th_int - mid))
     period_measured = float(np.mean(np.diff(crossings[::2]))) if len(crossings) > 2 else math.nan
     a, b = big_c * omega3 / big_a, float(L_z[0]) / big_a
     kind = locus_kind(b - a * u1, b - a * u2, abs(a) + abs(b) + 1e-300)

@@ -8,7 +8,7 @@ smallest axis, and the time between flips (mean spacing of the sign changes of `
 * measured on a :func:`jrigid.simulate` solve (Tsit5, tight tolerance) run through
   :func:`jrigid.ensemble.run`, members grouped by their closed-form flip time;
 * compared with the exact half-period ``2K(m)/λ_m`` of :func:`jrigid.exact.omega_period`;
-* and with the separatrix asymptote (:func:`jrigid.stability.flip_time_asymptotic`)
+* and with the separatrix asymptote (:func:`jrigid.theory.flip_interval_asymptotic`)
 
       T ≈ (2/λ) ln(C/ε),   λ = |ω| √((I3−I2)(I2−I1)/(I1 I3)),
       C = 4 √(I2(I2−I1)/(I3(I3−I1)))  (tilt toward I3),  4 √(I2(I3−I2)/(I1(I3−I1)))  (toward I1),
@@ -31,7 +31,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jrigid import ensemble, exact, initial, stability, viz
+from jrigid import ensemble, exact, initial, stability, theory, viz
 from jrigid.body import RigidBody
 from jrigid.integrate import simulate
 from jrigid.report import Report
@@ -136,7 +136,7 @@ def main(
     t_asym = np.empty(len(rows))
     for k, (b, e, s) in enumerate(rows):
         t_asym[k] = float(
-            stability.flip_time_asymptotic(bodies[b], 1.0, e, "largest" if s else "smallest")[0]
+            theory.flip_interval_asymptotic(bodies[b], 1.0, e, "largest" if s else "smallest")[0]
         )
 
     grid = jnp.linspace(0.0, 1.0, samples)
@@ -289,7 +289,7 @@ def main(
         colour = f"C{j}"
         mom = bodies[b]
         te = t_dense[j * len(dense) : (j + 1) * len(dense)]
-        ta = np.asarray(stability.flip_time_asymptotic(mom, 1.0, dense, "largest")[0])
+        ta = np.asarray(theory.flip_interval_asymptotic(mom, 1.0, dense, "largest")[0])
         label = f"I = ({mom[0]:.2f}, {mom[1]:.2f}, 1)"
         ax1.semilogx(dense, te, "-", color=colour, lw=1.0, label=label)
         ax1.semilogx(dense, ta, "--", color=colour, lw=0.8)

@@ -4,12 +4,13 @@ Problem 17.5 and eq. (17.47). For ``I1 = I2`` Euler's equations (17.35) with no 
 ``ω̇1 = −Ω ω2``, ``ω̇2 = Ω ω1``, ``ω3`` constant, with ``Ω = (I3/I1 − 1) ω3`` and
 ``ω3 = |ω| cos α`` (α the angle between ω and the symmetry axis 3): ``ω`` turns about body
 axis 3 at the rate Ω, so ``ω1 = A cos(Ωt + δ)``, ``ω2 = A sin(Ωt + δ)``. The chapter's
-``Is`` is ``I1 = I2``. Checks, on a plate (:func:`jrigid.demo.plate_moments`) simulated with
+``Is`` is ``I1 = I2``. Checks, on a plate (:func:`jrigid.inertia.disk`) simulated with
 :func:`jrigid.simulate`, that
 
 * ``ω3`` and ``ω1² + ω2²`` are constant, and ``ω1``, ``ω2`` are 90° apart (the angle
   ``atan2(ω2, ω1)`` advances uniformly);
-* the measured rate (slope of that angle, :func:`jrigid.viz.fit_rate`) equals (17.47),
+* the measured rate (slope of that angle, :func:`jrigid.theory.omega_phase_rate`) equals (17.47)
+  (:func:`jrigid.theory.body_precession_rate`),
   for the plate and for a sweep of ``I3/I1`` from rod-like (``Ω < 0``) to plate-like.
 
 Run it with ``jrigid run symmetric_precession [--quick]``.
@@ -23,22 +24,23 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jrigid import demo, initial, viz
+from jrigid import inertia, initial, viz
 from jrigid.body import RigidBody
 from jrigid.integrate import simulate
 from jrigid.report import Report
 from jrigid.scene import Scene
+from jrigid.theory import body_precession_rate, omega_phase_rate
 
 
 def precession(moments, rate, alpha, periods, n):
     """Simulate; return ``ω (n, 3)``, times, and measured / theoretical Ω (17.47)."""
     moments = np.asarray(moments, float)
     omega0 = rate * np.array([np.sin(alpha), 0.0, np.cos(alpha)])
-    theory = (moments[2] / moments[0] - 1.0) * rate * np.cos(alpha)
+    theory = float(body_precession_rate(moments, omega0))
     ts = jnp.linspace(0.0, periods * 2 * np.pi / abs(theory), n)
     traj = simulate(Scene(RigidBody(jnp.asarray(moments))), initial.from_omega(None, omega0), ts)
     w = np.asarray(traj.omega)
-    measured = viz.fit_rate(ts, np.unwrap(np.arctan2(w[:, 1], w[:, 0])))
+    measured = float(omega_phase_rate(ts, w, axis=2))
     return traj, w, np.asarray(ts), measured, float(theory)
 
 
@@ -72,7 +74,7 @@ def main(
     n = 401 if quick else samples
     ratios = tuple(ratios)[::2] if quick else tuple(ratios)
     alpha = np.radians(alpha_deg)
-    moments = demo.plate_moments(1.0, radius, thickness)
+    moments = np.asarray(inertia.disk(1.0, radius, thickness), dtype=float)
     traj, w, ts, measured, theory = precession(moments, rate, alpha, periods, n)
     perp = np.hypot(w[:, 0], w[:, 1])
     phase = np.unwrap(np.arctan2(w[:, 1], w[:, 0]))

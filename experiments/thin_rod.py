@@ -25,7 +25,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jrigid import demo, inertia, initial, viz
+from jrigid import inertia, initial, theory, viz
 from jrigid.body import RigidBody
 from jrigid.integrate import simulate
 from jrigid.report import Report
@@ -34,16 +34,15 @@ from jrigid.scene import Scene
 
 def tumble(moments, omega0, n, periods=3.0):
     """Simulate; measured and theoretical body and space precession rates."""
-    I1, _, I3 = moments
-    body_rate = (I3 / I1 - 1.0) * omega0[2]
-    space_rate = float(np.linalg.norm(moments * omega0) / I1)
+    body_rate = float(theory.body_precession_rate(moments, omega0))
+    space_rate = float(theory.plate_theory(moments, omega0)["precession_rate"])
     span = periods * 2 * np.pi / min(abs(body_rate), space_rate)
     ts = jnp.linspace(0.0, span, n)
     traj = simulate(Scene(RigidBody(jnp.asarray(moments))),
                     initial.from_omega(None, jnp.asarray(omega0)), ts)  # fmt: skip
     w = np.asarray(traj.omega)
-    measured = viz.fit_rate(ts, np.unwrap(np.arctan2(w[:, 1], w[:, 0])))
-    space = demo.wobble_to_spin(traj.ts, traj.q, traj.L_space, axis=2)["precession_rate"]
+    measured = float(theory.omega_phase_rate(ts, w, axis=2))
+    space = float(theory.wobble_to_spin(traj.ts, traj.q, traj.L_space)["precession_rate"])
     return traj, dict(body=measured, body_theory=body_rate, space=space, space_theory=space_rate)
 
 

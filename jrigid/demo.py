@@ -5,34 +5,24 @@
 (stills and GIFs) and writes a one-page ``report.md``.
 
 **The wobbling plate** (Feynman, *Surely You're Joking*, pp. 157–158; chapter Problem
-17.4). A disk of radius ``r`` and thickness ``h`` (:func:`jrigid.inertia.disk`:
-``I1 = I2 = m(3r² + h²)/12``, ``I3 = m r²/2``) is tossed spinning about its symmetry axis
-with a small tilt, so the axis makes a constant angle ``θ`` with ``L``. In Euler angles
-about ``L`` (:mod:`jrigid.viz.angles`) the axis precesses ("wobbles") at ``φ̇ = |L|/I1``
-and the plate turns about its own axis at ``ψ̇ = ω3 (I1 − I3)/I1``, with
-``|L| cos θ = I3 ω3``. Hence the wobble-to-spin ratio
-
-    |φ̇/ψ̇| = I3 / ((I3 − I1) cos θ) = 2 / ((1 − h²/(3r²)) cos θ),
-
-which is ``2/cos θ`` for a thin plate: the wobble is twice as fast as the spin. The demo
-fits straight lines to the unwrapped angles and compares.
+17.4). A disk of radius ``r`` and thickness ``h`` (:func:`jrigid.inertia.disk`) is tossed
+spinning about its symmetry axis with a small tilt ``θ`` from ``L``. In Euler angles about
+``L`` the axis precesses ("wobbles") at ``φ̇ = |L|/I1`` and the plate turns about its own
+axis at ``ψ̇ = ω3 (I1 − I3)/I1``, so the wobble-to-spin ratio is
+``|φ̇/ψ̇| = 2/((1 − h²/(3r²)) cos θ)``, ``2/cos θ`` for a thin plate
+(:func:`jrigid.theory.plate_theory`). The demo fits straight lines to the unwrapped
+angles (:func:`jrigid.theory.wobble_to_spin`) and compares.
 
 **The T-handle** (Dzhanibekov effect; the unstable intermediate axis, Problem 17.6). A
-T-shaped body of two solid cylinders (:func:`jrigid.viz.shapes.t_handle_parts`, moments
-from :mod:`jrigid.inertia`) spins about its intermediate principal axis with a small
-tilt; it flips over and back periodically. With the moments sorted ``A < B < C``,
-``2E = Σ Iᵢωᵢ²`` and ``L² = Σ Iᵢ²ωᵢ²``, Euler's equations are solved by Jacobi elliptic
-functions (Landau & Lifshitz §37): for ``L² > 2EB``
+T-shaped body of two solid cylinders (:func:`jrigid.inertia.t_handle_moments`) spins
+about its intermediate principal axis with a small tilt; it flips over and back
+periodically, every ``2K(m)/λ`` (:func:`jrigid.theory.flip_theory`; the full period is
+``4K(m)/λ``). The demo measures the times the intermediate component of ``ω`` crosses
+zero (:func:`jrigid.theory.zero_crossings`) and averages their spacing; if
+:mod:`jrigid.exact` is present it also compares ``ω(t)`` with the exact solution.
 
-    λ² = (C − B)(L² − 2EA)/(ABC),   1 − m = (C − A)(L² − 2EB) / ((C − B)(L² − 2EA)),
-
-(``A`` and ``C`` swap when ``L² < 2EB``), and the intermediate component is
-``ω_B ∝ sn(λt + c | m)``, which changes sign every ``2K(m)/λ``: the flip interval. The
-full period (flip and flip back) is ``4K(m)/λ``. ``K`` comes from
-:func:`jrigid.special.ellipk` with the complementary parameter, accurate close to the
-separatrix (``m → 1``). The demo measures the times ``ω_B`` crosses zero and averages
-their spacing; if :mod:`jrigid.exact` is present it also compares ``ω(t)`` with the
-exact solution.
+The theory functions and ``t_handle_moments`` are re-exported here from
+:mod:`jrigid.theory` and :mod:`jrigid.inertia`.
 
 Both simulations use the same number of output samples, so :func:`jrigid.simulate`
 compiles once. Frames for the GIFs are resampled at their own times (slerp), decoupled
@@ -52,10 +42,11 @@ import numpy as np
 from jrigid import inertia, initial, viz
 from jrigid import quaternion as quat
 from jrigid.body import RigidBody
+from jrigid.inertia import t_handle_moments
 from jrigid.integrate import simulate
 from jrigid.report import Report, format_number
 from jrigid.scene import Scene
-from jrigid.viz import shapes
+from jrigid.theory import flip_theory, plate_theory, wobble_to_spin, zero_crossings
 
 __all__ = [
     "flip_theory",
@@ -70,132 +61,12 @@ __all__ = [
 ]
 
 
-# --------------------------------------------------------------------------- theory
+# --------------------------------------------------------------------------- bodies
 
 
 def plate_moments(mass: float, radius: float, thickness: float) -> np.ndarray:
     """Principal moments ``(I1, I1, I3)`` of the plate (:func:`jrigid.inertia.disk`)."""
     return np.asarray(inertia.disk(mass, radius, thickness), dtype=float)
-
-
-def plate_theory(moments, omega_body) -> dict:
-    """Exact torque-free rates of a symmetric body (``I1 = I2``, symmetry axis 3).
-
-    Args:
-        moments: ``(3,)`` with ``I1 = I2``.
-        omega_body: ``(3,)`` body angular velocity at any instant.
-
-    Returns:
-        dict with ``theta`` (axis–``L`` angle), ``precession_rate`` ``φ̇ = |L|/I1``,
-        ``spin_rate`` ``ψ̇ = ω3 (I1 − I3)/I1``, ``ratio`` ``|φ̇/ψ̇|`` and ``ratio_thin``
-        ``2/cos θ`` (the thin-plate value).
-    """
-    mom = np.asarray(moments, dtype=float)
-    w = np.asarray(omega_body, dtype=float)
-    L = np.linalg.norm(mom * w)
-    theta = math.acos(mom[2] * w[2] / L)
-    phi_dot = L / mom[0]
-    psi_dot = w[2] * (mom[0] - mom[2]) / mom[0]
-    return dict(
-        theta=theta,
-        precession_rate=phi_dot,
-        spin_rate=psi_dot,
-        ratio=abs(phi_dot / psi_dot),
-        ratio_thin=2.0 / math.cos(theta),
-    )
-
-
-@jax.jit
-def _part_tensor(m, radius, length, orientation, center):
-    """Tensor about the common centre of mass of one solid cylinder of the T-handle."""
-    I_axis = inertia.to_tensor(inertia.solid_cylinder(m, radius, length))
-    return inertia.parallel_axis(inertia.rotate_tensor(I_axis, orientation), m, center)
-
-
-def t_handle_moments(mass: float = 1.0, **dims) -> np.ndarray:
-    """Principal moments of the T-handle of :func:`jrigid.viz.shapes.t_handle_parts`.
-
-    Each solid cylinder's central tensor (:func:`jrigid.inertia.solid_cylinder`) is turned
-    onto its axis (:func:`jrigid.inertia.rotate_tensor`) and shifted to the common centre
-    of mass (:func:`jrigid.inertia.parallel_axis`). By the body's mirror symmetries the
-    sum is diagonal in body ``x, y, z``.
-
-    Returns:
-        ``(3,)`` moments about body ``x, y, z``.
-    """
-    total = np.zeros((3, 3))
-    for part in shapes.t_handle_parts(**dims):
-        m = mass * part["mass_fraction"]
-        args = (m, part["radius"], part["length"], part["orientation"], part["center"])
-        total = total + np.asarray(_part_tensor(*(jnp.asarray(a) for a in args)), dtype=float)
-    off = np.abs(total - np.diag(np.diag(total))).max()
-    if off > 1e-9 * np.abs(total).max():
-        raise ValueError(f"T-handle tensor is not diagonal (off-diagonal {off:.3g})")
-    return np.diag(total).copy()
-
-
-def flip_theory(moments, omega_body) -> dict:
-    """Flip interval ``2K(m)/λ`` and period ``4K(m)/λ`` of torque-free motion.
-
-    For any body with distinct moments and an initial body angular velocity; the
-    intermediate axis is the one with the middle moment. Formulas in the module docstring;
-    ``1 − m`` is computed without cancellation from the components of ``ω``.
-
-    Args:
-        moments: ``(3,)`` distinct principal moments (any order).
-        omega_body: ``(3,)``.
-
-    Returns:
-        dict with ``flip_interval``, ``period``, ``m``, ``m1`` (``1 − m``), ``lam`` and
-        ``axis`` (index of the intermediate axis).
-    """
-    from jrigid import special
-
-    mom = np.asarray(moments, dtype=float)
-    w = np.asarray(omega_body, dtype=float)
-    a, b, c = (int(k) for k in np.argsort(mom))
-    A, B, C = mom[a], mom[b], mom[c]
-    wa, wb, wc = w[a], w[b], w[c]
-    # exact differences, free of cancellation
-    L2_2EB = A * (A - B) * wa**2 + C * (C - B) * wc**2  # L² − 2EB
-    L2_2EA = B * (B - A) * wb**2 + C * (C - A) * wc**2  # L² − 2EA  (> 0)
-    EC2_L2 = A * (C - A) * wa**2 + B * (C - B) * wb**2  # 2EC − L²  (> 0)
-    if L2_2EB >= 0:  # ω circulates about the axis of largest moment
-        lam = math.sqrt((C - B) * L2_2EA / (A * B * C))
-        m1 = (C - A) * L2_2EB / ((C - B) * L2_2EA)
-    else:  # ... about the axis of smallest moment
-        lam = math.sqrt((B - A) * EC2_L2 / (A * B * C))
-        m1 = (C - A) * (-L2_2EB) / ((B - A) * EC2_L2)
-    K = float(special.ellipk(m1=jnp.asarray(m1)))
-    return dict(flip_interval=2 * K / lam, period=4 * K / lam, m=1 - m1, m1=m1, lam=lam, axis=b)
-
-
-# --------------------------------------------------------------------------- measurement
-
-
-def wobble_to_spin(ts, q, L_space, axis: int = 2) -> dict:
-    """Measured precession and spin rates of body axis ``axis`` about ``L`` (line fits).
-
-    Returns:
-        dict with ``precession_rate``, ``spin_rate``, ``ratio`` ``|φ̇/ψ̇|`` and the mean
-        nutation ``theta``.
-    """
-    ang = viz.euler_about(q, L_space, axis=axis)
-    phi_dot = viz.fit_rate(ts, ang[:, 0])
-    psi_dot = viz.fit_rate(ts, ang[:, 2])
-    return dict(
-        precession_rate=phi_dot,
-        spin_rate=psi_dot,
-        ratio=abs(phi_dot / psi_dot),
-        theta=float(np.mean(ang[:, 1])),
-    )
-
-
-def zero_crossings(ts, x) -> np.ndarray:
-    """Times where the samples ``x`` change sign (linear interpolation between samples)."""
-    ts, x = np.asarray(ts, float), np.asarray(x, float)
-    i = np.nonzero(np.sign(x[:-1]) * np.sign(x[1:]) < 0)[0]
-    return ts[i] - x[i] * (ts[i + 1] - ts[i]) / (x[i + 1] - x[i])
 
 
 # --------------------------------------------------------------------------- simulation
@@ -251,6 +122,11 @@ def _exact_check(moments, traj) -> dict | None:
 # --------------------------------------------------------------------------- main
 
 
+def _floats(values: dict) -> dict:
+    """The ``()`` arrays of a :mod:`jrigid.theory` result as Python numbers."""
+    return {k: v if isinstance(v, int) else float(v) for k, v in values.items()}
+
+
 def _row(name, measured, theory):
     rel = abs(measured - theory) / abs(theory) if theory else float("nan")
     return (name, measured, theory, f"{rel:.1e}")
@@ -273,10 +149,10 @@ def run_plate(radius, thickness, tilt_deg, spin_hz, n_samples, wobbles) -> dict:
     # tilt θ between the symmetry axis and L: tan θ = I1 ω⊥ / (I3 ω3)
     w_perp = w3 * math.tan(math.radians(tilt_deg)) * moments[2] / moments[0]
     omega0 = np.array([w_perp, 0.0, w3])
-    theory = plate_theory(moments, omega0)
+    theory = _floats(plate_theory(moments, omega0))
     period = 2 * math.pi / theory["precession_rate"]
     traj = _simulate(moments, omega0, wobbles * period, n_samples)
-    measured = wobble_to_spin(traj.ts, traj.q, traj.L_space, axis=2)
+    measured = _floats(wobble_to_spin(traj.ts, traj.q, traj.L_space, axis=2))
     rows = [
         _row("wobble/spin |φ̇/ψ̇|", measured["ratio"], theory["ratio"]),
         _row("precession φ̇ (rad/s)", measured["precession_rate"], theory["precession_rate"]),
@@ -294,14 +170,14 @@ def run_t_handle(tilt_deg, spin_hz, n_samples, intervals, compare_exact) -> dict
         ``theory`` (:func:`flip_theory`), ``crossings``, ``flip_interval`` (measured),
         ``exact`` (:func:`_exact_check` or ``None``) and table ``rows``.
     """
-    moments = t_handle_moments(1.0)
+    moments = np.asarray(t_handle_moments(1.0), dtype=float)
     _, mid, top = (int(k) for k in np.argsort(moments))
     eps, rate = math.radians(tilt_deg), 2 * math.pi * spin_hz
     omega0 = np.zeros(3)
     omega0[mid], omega0[top] = rate * math.cos(eps), rate * math.sin(eps)
-    theory = flip_theory(moments, omega0)
+    theory = _floats(flip_theory(moments, omega0))
     traj = _simulate(moments, omega0, intervals * theory["flip_interval"], n_samples)
-    crossings = zero_crossings(traj.ts, traj.omega[:, mid])
+    crossings = np.asarray(zero_crossings(traj.ts, traj.omega[:, mid]))
     measured = float(np.mean(np.diff(crossings))) if len(crossings) >= 2 else float("nan")
     exact = _exact_check(moments, traj) if compare_exact else None
     rows = [_row("flip interval 2K/λ (s)", measured, theory["flip_interval"])]

@@ -1,4 +1,5 @@
-"""Inertia: moments of simple shapes, tensors of point masses, principal axes, checks.
+"""Inertia: moments of simple shapes and a T-handle, tensors of point masses, principal axes,
+checks.
 
 Implements chapter 17.29–17.32 and Table 17.1.
 
@@ -39,6 +40,8 @@ __all__ = [
     "rotate_tensor_by_matrix",
     "solid_cylinder",
     "sphere",
+    "t_handle_moments",
+    "t_handle_parts",
     "thin_disk",
     "thin_plate",
     "thin_rod",
@@ -214,6 +217,78 @@ def disk(m, r, thickness) -> jax.Array:
         :func:`thin_disk` as ``thickness → 0``.
     """
     return solid_cylinder(m, r, thickness)
+
+
+def t_handle_parts(
+    bar_length=1.0, bar_radius=0.08, stem_length=0.7, stem_radius=0.06
+) -> list[dict]:
+    """The two solid cylinders of a T-handle (Dzhanibekov's wing nut), centred on its
+    centre of mass.
+
+    The bar (the cross-piece) lies along body ``x``; the stem along ``+y`` starts at the
+    bar's surface (``y = bar_radius`` before centring), so the parts do not overlap and a
+    uniform density gives the mass fractions as volume fractions. Mirror symmetry in ``x``
+    and ``z`` makes ``x, y, z`` the principal axes. :func:`jrigid.viz.t_handle` draws it.
+
+    Args:
+        bar_length, bar_radius, stem_length, stem_radius: ``()`` sizes.
+
+    Returns:
+        two dicts (bar, stem) with ``radius``, ``length``, ``center (3,)`` (from the
+        common centre of mass), ``orientation (4,)`` (the quaternion turning a cylinder
+        along ``z`` onto the part's axis) and ``mass_fraction``.
+    """
+    v_bar = jnp.pi * as_float(bar_radius) ** 2 * bar_length
+    v_stem = jnp.pi * as_float(stem_radius) ** 2 * stem_length
+    total = v_bar + v_stem
+    y_stem = bar_radius + as_float(stem_length) / 2
+    y_cm = v_stem * y_stem / total
+    zero = jnp.zeros_like(y_cm)
+    z_to_x = quat.from_axis_angle(jnp.array([0.0, 1.0, 0.0]), jnp.pi / 2)
+    z_to_y = quat.from_axis_angle(jnp.array([1.0, 0.0, 0.0]), -jnp.pi / 2)
+    return [
+        dict(radius=bar_radius, length=bar_length, center=jnp.stack([zero, -y_cm, zero]),
+             orientation=z_to_x, mass_fraction=v_bar / total),
+        dict(radius=stem_radius, length=stem_length,
+             center=jnp.stack([zero, y_stem - y_cm, zero]), orientation=z_to_y,
+             mass_fraction=v_stem / total),
+    ]  # fmt: skip
+
+
+def t_handle_moments(mass=1.0, **dims) -> jax.Array:
+    """Principal moments of the T-handle of :func:`t_handle_parts` about body ``x, y, z``.
+
+    Each solid cylinder's central tensor (:func:`solid_cylinder`) is turned onto its axis
+    (:func:`rotate_tensor`) and shifted to the common centre of mass
+    (:func:`parallel_axis`). By the body's mirror symmetries the sum is diagonal.
+
+    Args:
+        mass: ``()`` total mass.
+        dims: the sizes of :func:`t_handle_parts`.
+
+    Returns:
+        ``(3,)`` moments (the middle one, about the stem's ``y``, is the intermediate).
+
+    Raises:
+        ValueError: (concrete input) if the tensor is not diagonal.
+
+    Example:
+        >>> from jrigid import inertia
+        >>> m = inertia.t_handle_moments(1.0)
+        >>> print(bool(m[0] < m[1] < m[2]))
+        True
+    """
+    total = jnp.zeros((3, 3))
+    for part in t_handle_parts(**dims):
+        m = as_float(mass) * part["mass_fraction"]
+        central = to_tensor(solid_cylinder(m, part["radius"], part["length"]))
+        total = total + parallel_axis(rotate_tensor(central, part["orientation"]), m,
+                                      part["center"])  # fmt: skip
+    if not is_traced(total):
+        off = jnp.abs(total - jnp.diag(jnp.diag(total))).max()
+        if off > 1e-9 * jnp.abs(total).max():
+            raise ValueError(f"T-handle tensor is not diagonal (off-diagonal {float(off):.3g})")
+    return jnp.diag(total)
 
 
 # --------------------------------------------------------------------------- tensors

@@ -34,7 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import jrigid
-from jrigid import affine, demo, exact, inertia, initial, stability, viz
+from jrigid import affine, exact, inertia, initial, stability, theory, viz
 from jrigid import quaternion as quat
 
 QUICK = os.environ.get("JRIGID_DOCS_QUICK", "0") not in ("", "0", "false", "False")
@@ -170,7 +170,7 @@ fig
 # half period `2K(m)/λ`, and near the separatrix `≈ (2/λ) ln(C/ε)`.
 
 # %%
-t_moments = jnp.asarray(demo.t_handle_moments())
+t_moments = inertia.t_handle_moments()
 mid = int(np.argsort(np.asarray(t_moments))[1])
 big = int(np.argmax(np.asarray(t_moments)))
 speed = 2 * jnp.pi * 1.5
@@ -186,7 +186,7 @@ def spin(eps):
 # The closed form for every tilt at once (batch dimensions broadcast).
 consts = exact.prepare(t_moments, quat.identity((tilts.size,)), spin(tilts))
 exact_half = exact.omega_period(consts) / 2
-asymptote, lam, _ = stability.flip_time_asymptotic(t_moments, speed, tilts)
+asymptote, lam, _ = theory.flip_interval_asymptotic(t_moments, speed, tilts)
 one = int(jnp.argmin(jnp.abs(tilts - jnp.deg2rad(1.0))))
 eps, half_period = tilts[one], float(exact_half[one])
 omega0 = spin(eps)

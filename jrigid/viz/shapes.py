@@ -9,8 +9,8 @@ and a base colour. Faces carry two alternating shades in sectors or bands so tha
 spinning symmetric body visibly turns (a uniformly coloured disk looks the same at every
 spin angle).
 
-Meshes are static drawing data, built once with numpy; placing parts (the T-handle) goes
-through :mod:`jrigid.affine`.
+Meshes are static drawing data, built once with numpy; placing parts (the T-handle, whose
+mass model is :func:`jrigid.inertia.t_handle_parts`) goes through :mod:`jrigid.affine`.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ import numpy as np
 from matplotlib import colors as mcolors
 
 from jrigid import affine
-from jrigid import quaternion as quat
+from jrigid.inertia import t_handle_parts
 
 from ._jit import bucket, float_dtype, pad
 
@@ -302,40 +302,6 @@ def merge(*meshes: Mesh) -> Mesh:
     )
 
 
-def t_handle_parts(
-    bar_length: float = 1.0,
-    bar_radius: float = 0.08,
-    stem_length: float = 0.7,
-    stem_radius: float = 0.06,
-) -> list[dict]:
-    """The two solid cylinders of a T-handle, placed with the centre of mass at the origin.
-
-    The bar (the cross-piece) lies along body ``x``; the stem along ``+y`` starts at the
-    bar's surface (``y = bar_radius`` before centring), so the parts do not overlap and a
-    uniform density gives the mass fractions as volume fractions. Mirror symmetry in ``x``
-    and ``z`` makes ``x, y, z`` the principal axes.
-
-    Returns:
-        two dicts with ``radius``, ``length``, ``center (3,)``, ``orientation (4,)`` (the
-        quaternion turning a cylinder along ``z`` onto the part's axis) and
-        ``mass_fraction``; feed them to :mod:`jrigid.inertia` (``solid_cylinder``,
-        ``rotate_tensor``, ``parallel_axis``) for the moments, as :mod:`jrigid.demo` does.
-    """
-    v_bar = np.pi * bar_radius**2 * bar_length
-    v_stem = np.pi * stem_radius**2 * stem_length
-    y_stem = bar_radius + stem_length / 2
-    y_cm = v_stem * y_stem / (v_bar + v_stem)
-    total = v_bar + v_stem
-    z_to_x = np.asarray(quat.from_axis_angle(jnp.array([0.0, 1.0, 0.0]), jnp.pi / 2))
-    z_to_y = np.asarray(quat.from_axis_angle(jnp.array([1.0, 0.0, 0.0]), -jnp.pi / 2))
-    return [
-        dict(radius=bar_radius, length=bar_length, center=np.array([0.0, -y_cm, 0.0]),
-             orientation=z_to_x, mass_fraction=v_bar / total),
-        dict(radius=stem_radius, length=stem_length, center=np.array([0.0, y_stem - y_cm, 0.0]),
-             orientation=z_to_y, mass_fraction=v_stem / total),
-    ]  # fmt: skip
-
-
 def t_handle(
     bar_length: float = 1.0,
     bar_radius: float = 0.08,
@@ -345,7 +311,8 @@ def t_handle(
 ) -> Mesh:
     """T-handle (Dzhanibekov's wing nut): bar along body ``x``, stem along ``+y``.
 
-    Centred on the centre of mass of a uniform body (see :func:`t_handle_parts`).
+    The parts and their placement are the mass model :func:`jrigid.inertia.t_handle_parts`
+    (re-exported here), centred on the centre of mass of a uniform body.
 
     Returns:
         :class:`Mesh`.
