@@ -308,17 +308,9 @@ def flip_time_asymptotic(
 ) -> tuple[jax.Array, jax.Array, jax.Array]:
     """Half-period between flips near the separatrix: ``T ≈ (2/λ) ln(C/ε)``.
 
-    Spin ``|ω| = speed`` about the intermediate axis tilted by ``ε`` toward the largest
-    (or smallest) axis. With sorted moments ``I1 < I2 < I3`` the exact half-period is
-    ``2K(m)/λ_m`` (:func:`jrigid.exact.omega_period` / 2). As ``ε → 0``:
-    ``λ_m → λ = |ω| √((I3−I2)(I2−I1)/(I1 I3))``, the linear growth rate about the middle
-    axis, and ``1 − m = I3(I3−I1) ε²/(I2(I2−I1))`` (toward the largest axis; toward the
-    smallest ``I1(I3−I1) ε²/(I2(I3−I2))``), both to ``O(ε²)``. With
-    ``K(m) = ln(4/√(1−m)) + O((1−m) ln(1−m))``,
-
-        T = (2/λ) ln(C/ε) (1 + O(ε²)),
-        C = 4 √(I2(I2−I1)/(I3(I3−I1)))   (toward the largest),
-        C = 4 √(I2(I3−I2)/(I1(I3−I1)))   (toward the smallest).
+    :func:`jrigid.theory.flip_interval_asymptotic` (the derivation is there): spin
+    ``|ω| = speed`` about the intermediate axis tilted by ``ε`` toward the largest (or
+    smallest) axis.
 
     Args:
         moments: ``(3,)`` distinct principal moments, any order.
