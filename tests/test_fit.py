@@ -327,3 +327,32 @@ def test_float32_fit_recovers(float32):
     np.testing.assert_allclose(m, np.asarray(TRUE_MOMENTS, np.float32), atol=2e-5)
     np.testing.assert_allclose(res.params["omega0"], np.asarray(TRUE_OMEGA0), atol=2e-5)
     assert fit.laplace(problem, res.params).rank == 5
+
+
+def test_a_new_observation_subclasses_abstract_observation():
+    """The extension point: a user's observation (here samples of ``|L|``) fits like the
+    built-in ones; ``Observation`` is the same class under its former name."""
+    assert fit.Observation is fit.AbstractObservation
+    for kind in (fit.Gyroscope, fit.Orientations, fit.AxisDirections, fit.WobbleRatio):
+        assert issubclass(kind, fit.AbstractObservation)
+
+    class MomentumMagnitude(fit.AbstractObservation):
+        ts: jax.Array
+        magnitude: jax.Array
+
+        def __init__(self, ts, magnitude):
+            self.ts = fit.observations.sample_times(ts)
+            self.magnitude = jnp.asarray(magnitude)
+
+        @property
+        def size(self):
+            return self.ts.shape[0]
+
+        def residuals(self, pred):
+            return jnp.linalg.norm(pred.moments[None] * pred.omega, axis=-1) - self.magnitude
+
+    ts = jnp.linspace(0.0, 1.0, 5)
+    magnitude = np.full(5, float(jnp.linalg.norm(TRUE_MOMENTS * TRUE_OMEGA0)))
+    problem = fit.Problem(fit.Exact(build), MomentumMagnitude(ts, magnitude))
+    assert problem.size == 5
+    assert float(problem.loss(truth())) < 1e-20

@@ -11,7 +11,8 @@ a top, to observed motion, with error bars:
 3. pair it with observations (:class:`Gyroscope`, :class:`Orientations`,
    :class:`AxisDirections`, or derived features of :mod:`jrigid.fit.features`:
    :class:`WobbleRatio`, :class:`PrecessionRate`, :class:`SpinRate`, :class:`Tilt`,
-   :class:`NutationRate`, :class:`FlipPeriod`) in a :class:`Problem`;
+   :class:`NutationRate`, :class:`FlipPeriod`; a new kind of data subclasses
+   :class:`AbstractObservation`) in a :class:`Problem`;
 4. :func:`fit` (optax L-BFGS or Adam, or Levenberg–Marquardt) and :func:`laplace`
    (Gauss–Newton covariance), :func:`propagate` for derived quantities.
 
@@ -75,6 +76,7 @@ from jrigid.fit.features import (
     unwrap,
 )
 from jrigid.fit.observations import (
+    AbstractObservation,
     AxisDirections,
     Gyroscope,
     Observation,
@@ -105,6 +107,7 @@ from jrigid.fit.uncertainty import (
 from jrigid.fit.verdict import FitError, FitWarning
 
 __all__ = [
+    "AbstractObservation",
     "AxisDirections",
     "Exact",
     "FitError",

@@ -1,25 +1,10 @@
 """The :func:`fit` driver: optax's L-BFGS (with its zoom line search), Adam, or
-Levenberg–Marquardt on a :class:`~jrigid.fit.problem.Problem`'s residuals — and a
-verdict on the result.
+Levenberg–Marquardt on a :class:`~jrigid.fit.problem.Problem`'s residuals, over one or
+several horizons — and a verdict on the result.
 
-Levenberg–Marquardt (``method="lm"``) takes the residuals' Jacobian by forward mode
-(``jax.jacfwd`` with diffrax's ``ForwardMode``): one tangent per parameter, the right
-choice when the parameters are few (see the README's adjoint measurement), and the
-Gauss–Newton model it steps on is the one :func:`jrigid.fit.laplace` uses for the error
-bars. The first-order methods take reverse-mode gradients.
-
-The Levenberg–Marquardt step solves ``(JᵀJ + μ D) h = −Jᵀr`` with ``D`` the largest
-``diag(JᵀJ)`` met so far (MINPACK's scaling) and accepts it when the gain ratio
-``ρ = (actual decrease)/(decrease predicted by the linear model) > 1e-4``; ``μ`` then
-shrinks by ``max(1/3, 1 − (2ρ − 1)³)``, and on a rejection grows by ``ν = 2, 4, 8, …``
-(Madsen, Nielsen & Tingleff, *Methods for non-linear least squares problems*, 2004,
-§3.2). Marquardt's own ``D = diag(JᵀJ)`` of the current point lets a parameter whose
-Jacobian column fades (a saturating map such as the softmax of
-:func:`jrigid.fit.moment_ratios` near a flat body) take ever longer steps — "parameter
-evaporation" (Transtrum & Sethna, arXiv:1201.5885; one step took a raw shape parameter
-from 5.9 to 112, onto a rod) — the running maximum keeps its damping. No local method
-keeps a fit from far away out of the optima on the edge of the physical region that
-the loss of a long record leads to; a growing record (``horizons``) does.
+One step of each method is in :mod:`jrigid.fit.steps`. No local method keeps a fit
+from far away out of the optima on the edge of the physical region that the loss of a
+long record leads to; a growing record (``horizons``) does.
 
 One compiled step function per call; the loop runs in Python so that it can stop,
 record a history and drive a ``tqdm`` progress bar. Stopping rules, checked before
@@ -43,21 +28,19 @@ Jacobian, stationarity) and reports the verdict in :attr:`FitResult.success` and
 
 from __future__ import annotations
 
-import functools
 import sys
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple
+from typing import Any
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 import optax
-from jax.flatten_util import ravel_pytree
 
 from jrigid.fit.problem import Problem
+from jrigid.fit.steps import LMState, lbfgs_step, lm_step, make_optimizer, plain_step
 from jrigid.fit.uncertainty import Laplace, residuals_and_jacobian
 from jrigid.fit.verdict import (
     DEFAULT_CHI2_ALPHA,
@@ -70,7 +53,6 @@ from jrigid.fit.verdict import (
 __all__ = ["FitResult", "fit"]
 
 _ON_BAD_FIT = ("warn", "raise", "ignore")
-_MU_MAX = 1e16
 
 
 @dataclass(repr=False)
@@ -183,90 +165,6 @@ def _inf_norm(tree) -> jax.Array:
     return jnp.max(jnp.stack([jnp.max(jnp.abs(x)) for x in leaves]))
 
 
-@functools.lru_cache(maxsize=32)
-def _optimizer(method: str, learning_rate: float | None) -> optax.GradientTransformation:
-    """One optimiser object per setting, so that the compiled step is reused."""
-    if method == "lbfgs":
-        return optax.lbfgs(learning_rate=learning_rate)
-    return optax.adam(1e-2 if learning_rate is None else learning_rate)
-
-
-@eqx.filter_jit
-def _lbfgs_step(f, optimizer, p, s):
-    value, grad = optax.value_and_grad_from_state(f)(p, state=s)
-    updates, s = optimizer.update(grad, s, p, value=value, grad=grad, value_fn=f)
-    return optax.apply_updates(p, updates), s, value, grad
-
-
-class _LMState(NamedTuple):
-    mu: float
-    nu: float
-    scale: jax.Array | None  # running maximum of diag(JᵀJ)
-    cache: tuple | None  # (r, J) at the current point
-    stalled: bool = False
-    gn_decrease: float = 0.0
-
-
-@jax.jit
-def _normal_equations(r, jac, scale):
-    """``(½ Σ r², Jᵀr, JᵀJ, max(scale, diag JᵀJ))``, the scale floored above zero."""
-    gn = jac.T @ jac
-    d = jnp.diagonal(gn) if scale is None else jnp.maximum(scale, jnp.diagonal(gn))
-    top = jnp.max(d)
-    d = jnp.where(d > 1e-12 * top, d, jnp.where(top > 0, 1e-12 * top, 1.0))
-    return 0.5 * jnp.sum(r * r), jac.T @ r, gn, d
-
-
-@jax.jit
-def _lm_trial(flat, grad, gn, scale, mu):
-    """``flat + h`` with ``(JᵀJ + μ D) h = −Jᵀr``, and the decrease the linear model predicts."""
-    h = jnp.linalg.solve(gn + jnp.diag(mu * scale), -grad)
-    predicted = -(grad @ h) - 0.5 * (h @ gn @ h)
-    return flat + h, predicted
-
-
-@jax.jit
-def _gauss_newton_decrease(r, jac):
-    """Decrease of ``½ Σ r²`` the undamped Gauss–Newton step promises, ``½ ‖P_J r‖²``."""
-    h = jnp.linalg.lstsq(jac, -r)[0]
-    return 0.5 * (jnp.sum(r * r) - jnp.sum((r + jac @ h) ** 2))
-
-
-def _lm_step(problem, _optimizer, p, s: _LMState):
-    """One accepted Levenberg–Marquardt step (gain-ratio test, MINPACK scaling).
-
-    Returns ``p`` unchanged with ``stalled=True`` when no damping up to ``μ = 1e16`` is
-    accepted.
-    """
-    flat, unravel = ravel_pytree(p)
-    r, jac = residuals_and_jacobian(problem, p) if s.cache is None else s.cache
-    value, grad, gn, scale = _normal_equations(r, jac, s.scale)
-    mu, nu = s.mu, s.nu
-    value_f = float(value)
-    while mu <= _MU_MAX:
-        trial, predicted = _lm_trial(flat, grad, gn, scale, jnp.asarray(mu, flat.dtype))
-        predicted = float(predicted)
-        if np.isfinite(predicted) and predicted > 0:
-            r_new, jac_new = residuals_and_jacobian(problem, unravel(trial))
-            new_value = 0.5 * float(jnp.sum(r_new * r_new))
-            rho = (value_f - new_value) / predicted
-            if np.isfinite(new_value) and rho > 1e-4:
-                mu = max(mu * max(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), 1e-15)
-                state = _LMState(mu, 2.0, scale, (r_new, jac_new))
-                return unravel(trial), state, value, unravel(grad)
-        mu *= nu
-        nu *= 2.0
-    decrease = float(_gauss_newton_decrease(r, jac))
-    return p, _LMState(mu, nu, scale, (r, jac), True, decrease), value, unravel(grad)
-
-
-@eqx.filter_jit
-def _plain_step(f, optimizer, p, s):
-    value, grad = jax.value_and_grad(f)(p)
-    updates, s = optimizer.update(grad, s, p)
-    return optax.apply_updates(p, updates), s, value, grad
-
-
 def fit(
     problem,
     params0,
@@ -365,7 +263,7 @@ def fit(
         if not mu0 > 0:
             raise ValueError(f"learning_rate (the initial damping) must be > 0, got {mu0}")
     else:
-        optimizer = _optimizer(method, learning_rate) if optimizer is None else optimizer
+        optimizer = make_optimizer(method, learning_rate) if optimizer is None else optimizer
     stages = _stages(problem, horizons) if horizons is not None else [problem]
 
     # One compiled function per fit: it returns the value and gradient at ``p`` and the
@@ -373,7 +271,7 @@ def fit(
     # the latter.
     # ``f`` is an argument (a pytree when it is a Problem's bound method), so problems
     # that differ only in their data (or their horizon) reuse the compiled step.
-    step = _lm_step if marquardt else _lbfgs_step if linesearch else _plain_step
+    step = lm_step if marquardt else lbfgs_step if linesearch else plain_step
     patience = 1 if linesearch or marquardt else 5
 
     show = (max_iter >= 100 and sys.stderr.isatty()) if progress is None else bool(progress)
@@ -390,7 +288,7 @@ def fit(
     try:
         for stage in stages:
             if marquardt:
-                f, state = stage, _LMState(mu0, 2.0, None, None)
+                f, state = stage, LMState(mu0, 2.0, None, None)
             else:
                 f = _as_loss(stage)
                 # strip weak types, else the second step recompiles

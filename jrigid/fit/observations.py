@@ -3,8 +3,10 @@
 Each observation holds sample times ``ts (T,)``, data and a noise level ``sigma``, and
 turns a :class:`Prediction` at those times into whitened residuals ``r`` (independent,
 unit variance if the model is right). Its negative log-likelihood is ``½ Σ r²``
-(:meth:`Observation.loss`); the Gauss–Newton covariance of :func:`jrigid.fit.laplace` is built from
-the Jacobian of ``r``.
+(:meth:`AbstractObservation.loss`); the Gauss–Newton covariance of
+:func:`jrigid.fit.laplace` is built from the Jacobian of ``r``. A new kind of data
+subclasses :class:`AbstractObservation` (the extension point; also named
+``Observation``).
 
 - :class:`Gyroscope` — angular velocity (body principal frame, the body's reference
   frame, or space), residual ``(ω − ω̂)/σ``;
@@ -21,7 +23,7 @@ non-positive ``sigma``, a zero quaternion or direction). Construct observations 
 
 ``sigma`` is the noise's standard deviation. Left out (``None``), the residuals are
 unweighted (``σ = 1``) and the observation records that its noise level is unknown
-(:attr:`Observation.sigma_given` is ``False``): :func:`jrigid.fit.fit` then does not
+(:attr:`AbstractObservation.sigma_given` is ``False``): :func:`jrigid.fit.fit` then does not
 test χ², and :func:`jrigid.fit.laplace` scales the covariance by ``χ²/dof``.
 """
 
@@ -38,6 +40,7 @@ from jax.typing import ArrayLike
 from jrigid import quaternion as quat
 
 __all__ = [
+    "AbstractObservation",
     "AxisDirections",
     "Gyroscope",
     "Observation",
@@ -220,11 +223,21 @@ def _unit_rows(x: jax.Array, name: str) -> jax.Array:
 # --------------------------------------------------------------------------- observations
 
 
-class Observation(eqx.Module):
-    """Base class of everything a :class:`~jrigid.fit.Problem` compares with a prediction.
+class AbstractObservation(eqx.Module):
+    """What a :class:`~jrigid.fit.Problem` compares with a prediction: the extension point.
 
-    A subclass holds ``ts (T,)`` and implements :meth:`residuals` and :attr:`size`; it
-    sets ``sigma_given`` (whether its noise level was stated).
+    Subclass it for a new kind of data (also available as ``Observation``). A
+    subclass is an ``equinox.Module`` that holds ``ts (T,)``, its data and noise levels,
+    validates them on construction (outside ``jit``; :func:`sample_times` and
+    :func:`sigma_array` check the common parts), and implements
+
+    - :meth:`residuals` — ``(size,)`` whitened residuals from a :class:`Prediction`
+      (differentiable: fits differentiate through it),
+    - :attr:`size` — their number;
+
+    it sets ``sigma_given`` (whether its noise level was stated), and overrides
+    :meth:`in_window` if its residuals are not laid out sample by sample. :meth:`loss`
+    follows. The derived features of :mod:`jrigid.fit.features` are subclasses too.
     """
 
     sigma_given: bool = eqx.field(static=True, default=True, kw_only=True)
@@ -252,7 +265,28 @@ class Observation(eqx.Module):
         return jnp.repeat(self.ts <= t_end, per, total_repeat_length=self.size)
 
 
-class Gyroscope(Observation):
+#: The name the base class has always had; :class:`AbstractObservation` itself.
+Observation = AbstractObservation
+
+
+class _PerSample(AbstractObservation):
+    """Three whitened residuals a sample: ``ts (T,)`` and noise levels ``sigma (T, 3)``."""
+
+    @property
+    def size(self) -> int:
+        return 3 * self.ts.shape[0]
+
+    def _noise(self, sigma) -> None:
+        """Set ``sigma`` (validated, ``(T, 3)``) and ``sigma_given``; in ``__init__``."""
+        self.sigma = sigma_array(sigma, self.ts.shape[0], 3)
+        self.sigma_given = sigma is not None
+
+    def _whitened(self, difference: jax.Array) -> jax.Array:
+        """``(3T,)`` ``difference / σ``, sample by sample."""
+        return (difference / self.sigma).reshape(-1)
+
+
+class Gyroscope(_PerSample):
     """A gyroscope record: angular velocity samples with Gaussian noise.
 
     Attributes:
@@ -282,13 +316,8 @@ class Gyroscope(Observation):
             raise ValueError(f"frame must be one of {_FRAMES}, got {frame!r}")
         self.ts = sample_times(ts)
         self.omega = _data(omega, self.ts, 3, "omega")
-        self.sigma = sigma_array(sigma, self.ts.shape[0], 3)
-        self.sigma_given = sigma is not None
+        self._noise(sigma)
         self.frame = frame
-
-    @property
-    def size(self) -> int:
-        return 3 * self.ts.shape[0]
 
     def predicted(self, pred: Prediction) -> jax.Array:
         """``(T, 3)`` angular velocity in this record's frame."""
@@ -304,10 +333,10 @@ class Gyroscope(Observation):
 
     def residuals(self, pred: Prediction) -> jax.Array:
         """``(3T,)`` whitened residuals ``(ω − ω̂)/σ``."""
-        return ((self.predicted(pred) - self.omega) / self.sigma).reshape(-1)
+        return self._whitened(self.predicted(pred) - self.omega)
 
 
-class Orientations(Observation):
+class Orientations(_PerSample):
     """Orientation samples (quaternions, any sign, normalised here).
 
     Attributes:
@@ -336,13 +365,8 @@ class Orientations(Observation):
             raise ValueError(f"frame must be 'principal' or 'reference', got {frame!r}")
         self.ts = sample_times(ts)
         self.q = _unit_rows(_data(q, self.ts, 4, "q"), "q")
-        self.sigma = sigma_array(sigma, self.ts.shape[0], 3)
-        self.sigma_given = sigma is not None
+        self._noise(sigma)
         self.frame = frame
-
-    @property
-    def size(self) -> int:
-        return 3 * self.ts.shape[0]
 
     def predicted(self, pred: Prediction) -> jax.Array:
         """``(T, 4)`` predicted orientation of this record's frame."""
@@ -354,10 +378,10 @@ class Orientations(Observation):
 
     def residuals(self, pred: Prediction) -> jax.Array:
         """``(3T,)`` whitened residuals ``2 sign(q̂·q) vec(q̂* ⊗ q)/σ``."""
-        return (_orientation_residual(self.predicted(pred), self.q) / self.sigma).reshape(-1)
+        return self._whitened(_orientation_residual(self.predicted(pred), self.q))
 
 
-class AxisDirections(Observation):
+class AxisDirections(_PerSample):
     """Directions in space of one body-fixed axis (a camera tracking a mark).
 
     Attributes:
@@ -378,8 +402,7 @@ class AxisDirections(Observation):
     ):
         self.ts = sample_times(ts)
         self.directions = _unit_rows(_data(directions, self.ts, 3, "directions"), "directions")
-        self.sigma = sigma_array(sigma, self.ts.shape[0], 3)
-        self.sigma_given = sigma is not None
+        self._noise(sigma)
         if isinstance(axis, int):
             if axis not in (0, 1, 2):
                 raise ValueError(f"axis must be 0, 1, 2 or a 3-vector, got {axis}")
@@ -389,10 +412,6 @@ class AxisDirections(Observation):
             raise ValueError(f"axis must be a finite non-zero 3-vector, got {a.tolist()}")
         self.axis = jnp.asarray(a / np.linalg.norm(a), dtype=jnp.result_type(float))
 
-    @property
-    def size(self) -> int:
-        return 3 * self.ts.shape[0]
-
     def predicted(self, pred: Prediction) -> jax.Array:
         """``(T, 3)`` predicted direction of the axis in space."""
         if pred.q is None:
@@ -401,4 +420,4 @@ class AxisDirections(Observation):
 
     def residuals(self, pred: Prediction) -> jax.Array:
         """``(3T,)`` whitened residuals ``(R a − û)/σ``."""
-        return ((self.predicted(pred) - self.directions) / self.sigma).reshape(-1)
+        return self._whitened(self.predicted(pred) - self.directions)

@@ -30,7 +30,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jrigid import exact
-from jrigid.fit.observations import Observation, Prediction
+from jrigid.fit.observations import AbstractObservation, Prediction
 from jrigid.integrate import simulate
 from jrigid.scene import FreeRotation, Scene
 from jrigid.state import State
@@ -89,7 +89,24 @@ class Simulated(eqx.Module):
         return Prediction(traj.q, traj.omega, scene.body.frame, moments)
 
 
-class Exact(eqx.Module):
+class _TorqueFree(eqx.Module):
+    """A forward model built on the closed-form torque-free motion of ``build(theta)``."""
+
+    build: Callable[[Any], tuple[Scene, State]] = eqx.field(static=True)
+
+    def __init__(self, build: Callable[[Any], tuple[Scene, State]]):
+        self.build = build
+
+    def _prepared(self, theta, refusal: str):
+        """``(scene, state, constants)`` of ``build(theta)``; ``ValueError(refusal)`` for a
+        scene that is not torque-free."""
+        scene, state = _built(self.build, theta)
+        if not isinstance(scene.holder, FreeRotation) or scene.loads:
+            raise ValueError(refusal)
+        return scene, state, exact.prepare(scene.body.moments, state.q, state.omega)
+
+
+class Exact(_TorqueFree):
     """Forward model through the closed-form torque-free solution :func:`jrigid.exact.solve`.
 
     Args:
@@ -97,24 +114,17 @@ class Exact(eqx.Module):
             scene and no loads; the state is at ``ts[0]``.
     """
 
-    build: Callable[[Any], tuple[Scene, State]] = eqx.field(static=True)
-
-    def __init__(self, build: Callable[[Any], tuple[Scene, State]]):
-        self.build = build
-
     def __call__(self, theta, ts, *, forward_mode: bool = False) -> Prediction:
-        scene, state = _built(self.build, theta)
-        if not isinstance(scene.holder, FreeRotation) or scene.loads:
-            raise ValueError(
-                "the Exact model is for torque-free FreeRotation scenes without loads; "
-                "use Simulated"
-            )
-        consts = exact.prepare(scene.body.moments, state.q, state.omega)
+        scene, state, consts = self._prepared(
+            theta,
+            "the Exact model is for torque-free FreeRotation scenes without loads; "
+            "use Simulated",
+        )
         q, omega = exact.evaluate(consts, ts - ts[0])
         return Prediction(q, omega, scene.body.frame, scene.body.moments, consts)
 
 
-class Invariants(eqx.Module):
+class Invariants(_TorqueFree):
     """Forward model for closed-form features only (:mod:`jrigid.fit.features`).
 
     Predicts no trajectory: only the moments, the initial spin and the constants of the
@@ -128,18 +138,10 @@ class Invariants(eqx.Module):
             scene without loads.
     """
 
-    build: Callable[[Any], tuple[Scene, State]] = eqx.field(static=True)
-
-    def __init__(self, build: Callable[[Any], tuple[Scene, State]]):
-        self.build = build
-
     def __call__(self, theta, ts, *, forward_mode: bool = False) -> Prediction:
-        scene, state = _built(self.build, theta)
-        if not isinstance(scene.holder, FreeRotation) or scene.loads:
-            raise ValueError(
-                "the Invariants model is for torque-free FreeRotation scenes without loads"
-            )
-        consts = exact.prepare(scene.body.moments, state.q, state.omega)
+        scene, state, consts = self._prepared(
+            theta, "the Invariants model is for torque-free FreeRotation scenes without loads"
+        )
         omega = jnp.broadcast_to(state.omega, ts.shape + (3,))
         return Prediction(None, omega, scene.body.frame, scene.body.moments, consts)
 
@@ -169,14 +171,20 @@ class Problem(eqx.Module):
     index: tuple
     horizon: jax.Array
 
-    def __init__(self, model, observations: Observation | Sequence[Observation], *, t0=None):
-        if isinstance(observations, Observation):
+    def __init__(
+        self,
+        model,
+        observations: AbstractObservation | Sequence[AbstractObservation],
+        *,
+        t0=None,
+    ):
+        if isinstance(observations, AbstractObservation):
             observations = (observations,)
         observations = tuple(observations)
         if not observations:
             raise ValueError("Problem needs at least one observation")
         for obs in observations:
-            if not isinstance(obs, Observation):
+            if not isinstance(obs, AbstractObservation):
                 raise ValueError(
                     "observations must be Gyroscope, Orientations, AxisDirections or a "
                     f"feature of jrigid.fit.features, got {obs!r}"
