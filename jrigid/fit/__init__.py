@@ -58,23 +58,9 @@ Example: moment ratios and initial spin of a tumbling body from a noisy gyroscop
     True
 """
 
+from jrigid.fit import features
 from jrigid.fit.driver import FitResult, fit
-from jrigid.fit.features import (
-    FlipPeriod,
-    FreeRates,
-    NutationRate,
-    PrecessionRate,
-    SpinRate,
-    Tilt,
-    WobbleRatio,
-    angle_rate,
-    axis_angles,
-    free_rates,
-    omega_phase_rate,
-    rates_from_constants,
-    trajectory_rates,
-    unwrap,
-)
+from jrigid.fit.features import *  # noqa: F403 - every name of features.__all__, added below
 from jrigid.fit.observations import (
     AbstractObservation,
     AxisDirections,
@@ -113,26 +99,16 @@ __all__ = [
     "FitError",
     "FitResult",
     "FitWarning",
-    "FlipPeriod",
-    "FreeRates",
     "Gyroscope",
     "Invariants",
     "Laplace",
-    "NutationRate",
     "Observation",
     "Orientations",
-    "PrecessionRate",
     "Prediction",
     "Problem",
     "Simulated",
-    "SpinRate",
-    "Tilt",
-    "WobbleRatio",
-    "angle_rate",
-    "axis_angles",
     "axis_loss",
     "fit",
-    "free_rates",
     "gyroscope_loss",
     "inertia_tensor",
     "laplace",
@@ -140,15 +116,13 @@ __all__ = [
     "moment_ratios_raw",
     "moments",
     "moments_raw",
-    "omega_phase_rate",
     "orientation_loss",
     "parameter_names",
     "positive",
     "positive_raw",
     "propagate",
-    "rates_from_constants",
     "residuals_and_jacobian",
-    "trajectory_rates",
     "unit_quaternion",
-    "unwrap",
 ]
+# The derived features: every name of their own ``__all__``.
+__all__ += features.__all__
