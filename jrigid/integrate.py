@@ -52,23 +52,19 @@ from jrigid import closed_form, splitting
 from jrigid.formulations import AbstractFormulation, get_formulation
 from jrigid.invariants import Invariants
 from jrigid.scene import Scene
-from jrigid.solve import (
-    DEFAULT_SOLVER,
-    ProjectedSolver,
+from jrigid.solve.inputs import input_checks, normalised, prepare, screen, warn_precision
+from jrigid.solve.outcome import classify, finish, raise_on_failure
+from jrigid.solve.stepping import (  # DEFAULT_SOLVER: also named here
+    DEFAULT_SOLVER,  # noqa: F401
     controller,
-    finish,
-    input_checks,
-    normalised,
-    prepare,
-    raise_on_failure,
-    screen,
+    projected,
+    run,
     solver_options,
-    warn_precision,
 )
 from jrigid.state import State
-from jrigid.trajectory import Result, SimulationError, Trajectory
+from jrigid.trajectory import Result, SimulationError, Trajectory  # noqa: F401  (also named here)
 
-__all__ = ["DEFAULT_SOLVER", "Result", "SimulationError", "simulate"]
+__all__ = ["simulate"]
 
 _FORWARD_MODE_HINT = (
     "forward-mode differentiation (jax.jvp/jacfwd) of jrigid.simulate needs "
@@ -173,35 +169,18 @@ def _solve_body(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoint,
     invalid, cause, scene, state, ts, rtol, atol = screen(checks, scene, state, ts, rtol, atol)
     state = normalised(state)
     y0 = formulation.from_state(scene, state)
-    manifold, restore = project
-    save_fn = None
-    if manifold and formulation.carries_quaternion:
-        invariants = Invariants.of(scene, state.q, state.omega) if restore else None
-        solver = ProjectedSolver(solver, formulation, invariants)
-        save_fn = solver.save
     user_saveat = saveat is not None
     if saveat is None:
         saveat = diffrax.SaveAt(ts=ts, t1=True, dense=dense)
-    if save_fn is not None:
-        saveat = eqx.tree_at(lambda s: s.subs.fn, saveat, save_fn)
-    own_event = formulation.event()
-    sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(formulation.vector_field),
-        solver,
-        ts[0],
-        ts[-1],
-        dt0,
-        y0,
-        args=scene,
-        saveat=saveat,
-        stepsize_controller=(
-            controller(ts, rtol, atol) if stepsize_controller is None else stepsize_controller
-        ),
-        adjoint=adjoint,
-        event=own_event if event is None else event,
-        max_steps=max_steps,
-        throw=False,
-    )
+    manifold, restore = project
+    if manifold and formulation.carries_quaternion:
+        invariants = Invariants.of(scene, state.q, state.omega) if restore else None
+        solver, saveat = projected(solver, formulation, invariants, saveat)
+    if stepsize_controller is None:
+        stepsize_controller = controller(ts, rtol, atol)
+    sol = run(formulation, solver, ts, dt0, y0, scene, saveat=saveat,
+              stepsize_controller=stepsize_controller, adjoint=adjoint, max_steps=max_steps,
+              event=formulation.event() if event is None else event)
     interpolation = sol.interpolation if (dense or saveat.dense) else None
     if user_saveat:
         traj = _finish_saved(scene, formulation, ts, sol, interpolation, invalid, event)
@@ -214,8 +193,6 @@ def _solve_body(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoint,
 def _finish_saved(scene, formulation, ts, sol, interpolation, invalid, event):
     """The trajectory of a user's ``SaveAt``: its times as diffrax filled them (``inf``
     padding becomes NaN outputs)."""
-    from jrigid.solve import classify
-
     saved = jnp.isfinite(sol.ts) & ~invalid
     t_end = jnp.max(jnp.where(jnp.isfinite(sol.ts), sol.ts, -jnp.inf))
     i_end = jnp.argmax(sol.ts == t_end)
@@ -267,7 +244,7 @@ def simulate(
         formulation: name (``"quaternion_acceleration"`` default, ``"quaternion_omega"``,
             ``"body_omega"``, ``"euler_angles"``) or a formulation object (e.g.
             ``QuaternionAcceleration(stabilization=1.0)``).
-        solver: any diffrax solver; default :data:`DEFAULT_SOLVER`
+        solver: any diffrax solver; default :data:`jrigid.solve.DEFAULT_SOLVER`
             (:class:`jrigid.solvers.FusedTsit5`). Fixed-step solvers (``diffrax.Euler``,
             ``diffrax.Heun``, ...) need ``stepsize_controller=diffrax.ConstantStepSize()``
             and ``dt0``. Or ``"exact"``: the closed-form motion (:mod:`jrigid.closed_form`)

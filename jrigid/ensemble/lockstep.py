@@ -42,17 +42,9 @@ from jax.typing import ArrayLike
 from jrigid.formulations import AbstractFormulation, get_formulation
 from jrigid.invariants import Invariants
 from jrigid.scene import Scene
-from jrigid.solve import (
-    ProjectedSolver,
-    controller,
-    finish,
-    input_checks,
-    normalised,
-    prepare,
-    raise_on_failure,
-    screen,
-    solver_options,
-)
+from jrigid.solve.inputs import input_checks, normalised, prepare, screen
+from jrigid.solve.outcome import finish, raise_on_failure
+from jrigid.solve.stepping import controller, projected, run, solver_options
 from jrigid.state import State
 from jrigid.trajectory import Trajectory
 
@@ -129,32 +121,17 @@ def _solve(scene, states, ts, rtol, atol, dt0, formulation, solver, adjoint, max
     states = jax.vmap(normalised)(states)
     y0 = _over_members(lambda sc, s: formulation.from_state(sc, s), scene_axis)(scene, states)
     batched = _Batched(formulation, scene_axis)
-    save = None
+    saveat = diffrax.SaveAt(ts=ts, t1=True)
     if project:
         invariants = None
         if scene.torque_free or scene.conservative_top:
             invariants = _over_members(
                 lambda sc, s: Invariants.of(sc, s.q, s.omega), scene_axis
             )(scene, states)
-        solver = ProjectedSolver(solver, batched, invariants)
-        save = solver.save
-    saveat = diffrax.SaveAt(ts=ts, t1=True)
-    if save is not None:
-        saveat = eqx.tree_at(lambda s: s.subs.fn, saveat, save)
-    sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(batched.vector_field),
-        solver,
-        ts[0],
-        ts[-1],
-        dt0,
-        y0,
-        args=scene,
-        saveat=saveat,
-        stepsize_controller=controller(ts, rtol, atol, norm=_max_member_rms),
-        adjoint=adjoint,
-        max_steps=max_steps,
-        throw=False,
-    )
+        solver, saveat = projected(solver, batched, invariants, saveat)
+    sol = run(batched, solver, ts, dt0, y0, scene, saveat=saveat,
+              stepsize_controller=controller(ts, rtol, atol, norm=_max_member_rms),
+              adjoint=adjoint, max_steps=max_steps)
     ys = jax.tree_util.tree_map(lambda a: jnp.moveaxis(a, 1, 0), sol.ys)  # (N, T + 1, ...)
 
     def one(sc, y, bad):

@@ -1,0 +1,186 @@
+"""A solve's outcome: diffrax's result as a :class:`~jrigid.trajectory.Result` and a trajectory.
+
+:func:`classify` turns diffrax's outcome into a :class:`~jrigid.trajectory.Result` code,
+:func:`finish` (a diffrax solution) and :func:`finish_sampled` (states computed directly
+at the output times) build the :class:`~jrigid.trajectory.Trajectory`, and
+:func:`raise_on_failure` raises or not.
+"""
+
+from __future__ import annotations
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jrigid._checks import is_traced
+from jrigid.solve.inputs import message
+from jrigid.trajectory import CAUSES, Result, SimulationError, Trajectory
+
+__all__ = ["classify", "finish", "finish_sampled", "raise_on_failure"]
+
+
+def _all_finite(tree) -> jax.Array:
+    leaves = jax.tree_util.tree_leaves(tree)
+    return jnp.all(jnp.stack([jnp.all(jnp.isfinite(a)) for a in leaves]))
+
+
+def classify(sol_result, formulation, scene, y_end, t_end, ys, span, user_event=False):
+    """Map diffrax's result to a :class:`~jrigid.trajectory.Result` code (``()`` int32).
+
+    A collapsed step size is blamed on non-finite values if the vector field is
+    non-finite at the last accepted state or at probes a little beyond it (rejected
+    trial steps are not kept, so their NaNs are not otherwise visible). An event is
+    :attr:`~jrigid.trajectory.Result.gimbal_lock` for a formulation's own event and
+    :attr:`~jrigid.trajectory.Result.event` when the user passed one (``user_event``).
+    """
+    R = diffrax.RESULTS
+    f_end = formulation.vector_field(t_end, y_end, scene)
+    finite = _all_finite(y_end) & _all_finite(f_end)
+    for frac in (1e-12, 1e-8, 1e-4):
+        d = frac * span
+        y_probe = jax.tree_util.tree_map(lambda y, f, d=d: y + d * f, y_end, f_end)
+        finite = finite & _all_finite(formulation.vector_field(t_end + d, y_probe, scene))
+    code = jnp.where(sol_result == R.max_steps_reached, Result.max_steps, Result.solver_failure)
+    code = jnp.where(
+        sol_result == R.dt_min_reached,
+        jnp.where(finite, Result.step_size_collapse, Result.nonfinite),
+        code,
+    )
+    event_code = Result.event if user_event else Result.gimbal_lock
+    code = jnp.where(sol_result == R.event_occurred, event_code, code)
+    ok = jnp.where(_all_finite(ys), Result.success, Result.nonfinite)
+    return jnp.where(sol_result == R.successful, ok, code).astype(jnp.int32)
+
+
+def finish(scene, formulation, ts, saved_ts, saved_ys, sol_result, sol_stats,
+           interpolation=None, invalid=None, user_event=False):
+    """One member's :class:`~jrigid.trajectory.Trajectory` from a diffrax solution.
+
+    Args:
+        scene, formulation: as solved.
+        ts: ``(T,)`` the requested output times.
+        saved_ts: ``(T + 1,)`` ``sol.ts`` of ``SaveAt(ts=ts, t1=True)``.
+        saved_ys: ``sol.ys``, leading axis ``T + 1``.
+        sol_result, sol_stats: ``sol.result`` and ``sol.stats`` (the step counts are kept).
+        interpolation: ``sol.interpolation`` or ``None``.
+        invalid: ``()`` bool from :func:`~jrigid.solve.inputs.screen`, or ``None``: an
+            invalid member's outputs are NaN and its code
+            :attr:`~jrigid.trajectory.Result.invalid_input`.
+        user_event: whether an event of the user's may have stopped the solve.
+    """
+    stats = {k: sol_stats[k] for k in ("num_steps", "num_accepted_steps", "num_rejected_steps")}
+    # diffrax writes the final state into the first unfilled slot: on failure that is
+    # not the last one. Keep only slots saved at their requested time; NaN elsewhere.
+    valid = saved_ts[:-1] == ts
+    if invalid is not None:
+        valid = valid & ~invalid
+    t_end = jnp.max(jnp.where(jnp.isfinite(saved_ts), saved_ts, -jnp.inf))
+    i_end = jnp.argmax(saved_ts == t_end)
+    y_end = jax.tree_util.tree_map(lambda a: a[i_end], saved_ys)
+
+    def _mask(a):
+        keep = valid.reshape(valid.shape + (1,) * (a.ndim - 1))
+        return jnp.where(keep, a[:-1], jnp.nan)
+
+    ys = jax.tree_util.tree_map(_mask, saved_ys)
+    result = classify(sol_result, formulation, scene, y_end, t_end, ys, ts[-1] - ts[0],
+                      user_event)
+    if invalid is not None:
+        result = jnp.where(invalid, jnp.int32(Result.invalid_input), result)
+        t_end = jnp.where(invalid, ts[0], t_end)
+    return Trajectory.build(
+        scene,
+        formulation,
+        ts,
+        ys,
+        stats=stats,
+        result=result,
+        t_stop=t_end,
+        interpolation=interpolation,
+    )
+
+
+def finish_sampled(scene, formulation, ts, ys, invalid=None, interpolation=None, steps=None):
+    """A :class:`~jrigid.trajectory.Trajectory` of states computed directly at ``ts``.
+
+    For solvers without diffrax's loop (the closed forms, fixed-step integrators):
+    the result is ``success`` if every output is finite, else ``nonfinite``; an
+    ``invalid`` member (:func:`~jrigid.solve.inputs.screen`) gets NaN outputs and ``invalid_input``.
+
+    Args:
+        ys: the formulation's states at ``ts`` (leading axis ``T``).
+        invalid: ``()`` bool or ``None``.
+        interpolation: a dense output (``evaluate(t)``) or ``None``.
+        steps: ``()`` int32 step count (zero for a closed form).
+    """
+    if invalid is not None:
+        ys = jax.tree_util.tree_map(lambda a: jnp.where(invalid, jnp.nan, a), ys)
+    result = jnp.where(_all_finite(ys), Result.success, Result.nonfinite).astype(jnp.int32)
+    t_stop = ts[-1]
+    if invalid is not None:
+        result = jnp.where(invalid, jnp.int32(Result.invalid_input), result)
+        t_stop = jnp.where(invalid, ts[0], t_stop)
+    steps = jnp.zeros((), jnp.int32) if steps is None else steps
+    stats = dict(num_steps=steps, num_accepted_steps=steps,
+                 num_rejected_steps=jnp.zeros((), jnp.int32))
+    return Trajectory.build(scene, formulation, ts, ys, stats=stats, result=result,
+                            t_stop=t_stop, interpolation=interpolation)
+
+
+def raise_on_failure(traj: Trajectory, throw: bool, ts, rtol, atol, max_steps: int,
+                     messages=None, cause=None):
+    """Apply ``throw`` (see :func:`jrigid.simulate`) to a solved trajectory.
+
+    Concrete results: ``ValueError`` for an invalid input (``messages[cause]``),
+    :class:`~jrigid.trajectory.SimulationError` for a failed integration (for a batch:
+    its first failed member, with the count). Traced results: one
+    ``equinox.branched_error_if`` whose message is the cause first, then the remedy.
+    ``throw=False`` returns ``traj`` as it is.
+    """
+    if not throw:
+        return traj
+    if is_traced(traj.result):
+        texts = [""] * len(Result)
+        for k, cause_text, remedy in ((k, *CAUSES[k]) for k in Result if k.failed):
+            texts[k] = (
+                f"jrigid.simulate failed: {cause_text.format(max_steps=max_steps)}; "
+                f"{remedy}. (Under vmap, pass throw=False for per-member result codes.)"
+            )
+        if messages is not None and cause is not None:
+            # An invalid input names its check (the first invalid member's under vmap).
+            codes = traj.result.reshape(-1)
+            bad_input = jnp.any(codes == Result.invalid_input)
+            first_cause = jnp.reshape(cause, (-1,))[jnp.argmax(codes == Result.invalid_input)]
+            traj = eqx.branched_error_if(
+                traj, bad_input, first_cause, [f"jrigid.simulate: {m}" for m in messages]
+            )
+        codes = traj.result.reshape(-1)
+        is_failure = (codes != Result.success) & (codes != Result.event)
+        first = codes[jnp.argmax(is_failure)]
+        return eqx.branched_error_if(traj, jnp.any(is_failure), first, texts)
+    codes = np.asarray(traj.result)
+    failed = (codes != Result.success) & (codes != Result.event)
+    if not failed.any():
+        return traj
+    flat = failed.reshape(-1)
+    k = int(flat.argmax())
+    which = f"member {k} of {flat.size} ({int(flat.sum())} failed) " if codes.ndim else ""
+    code = Result(int(codes.reshape(-1)[k]))
+    if code == Result.invalid_input and messages is not None:
+        index = int(np.asarray(cause).reshape(-1)[k])
+        where = f" (member {k} of {flat.size})" if codes.ndim else ""
+        raise ValueError(message(messages, index, rtol, atol) + where)
+    member = traj
+    if codes.ndim:
+        member = jax.tree_util.tree_map(lambda a: a.reshape(-1, *a.shape[codes.ndim:])[k], traj)
+    cause_text, remedy = CAUSES[code]
+    raise SimulationError(
+        f"jrigid.simulate failed {which}at t={float(member.t_stop):.6g} "
+        f"(integrating {float(ts[0]):.6g} → {float(ts[-1]):.6g}, "
+        f"{int(member.stats['num_accepted_steps'])} accepted and "
+        f"{int(member.stats['num_rejected_steps'])} rejected steps, "
+        f"rtol={float(rtol):.3g}, atol={float(atol):.3g}): "
+        f"{cause_text.format(max_steps=max_steps)}; remedy: {remedy}."
+    )

@@ -1,0 +1,210 @@
+"""How a solve steps: the default solver and its options, the controller, the projection.
+
+Every diffrax-based jrigid solve steps under :func:`controller` (a PID controller), with
+its solver wrapped in :class:`ProjectedSolver` for formulations that carry a quaternion
+(back onto ``|q| = 1`` and onto the scene's invariants after each step, :func:`projected`),
+and calls diffrax through :func:`run`.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import diffrax
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from jrigid._checks import is_traced
+from jrigid.formulations import AbstractFormulation
+from jrigid.invariants import Invariants
+from jrigid.solvers import FusedTsit5
+
+__all__ = [
+    "DEFAULT_SOLVER",
+    "ProjectedSolver",
+    "controller",
+    "projected",
+    "run",
+    "solver_options",
+]
+
+
+#: The solver of :func:`jrigid.simulate` and the other integrators when none is given
+#: (a class, instantiated per call).
+DEFAULT_SOLVER = FusedTsit5
+
+
+class ProjectedSolver(diffrax.AbstractWrappedSolver):
+    """Wrap a diffrax solver; project every step's result back onto the constraints.
+
+    ``step`` calls the inner solver, then replaces ``y1`` by
+    ``formulation.project(y1, args, invariants)``: ``q ← q/|q|`` (and for
+    ``quaternion_acceleration`` ``q̇ ← ½ q ⊗ (0, ω)``, which keeps ``q·q̇ = 0``), and,
+    when ``invariants`` is given, the smallest change of ``(q, ω)`` that restores the
+    scene's conserved quantities (:func:`jrigid.invariants.project`). The error estimate
+    is the inner solver's, so step control is unchanged. A first-same-as-last solver
+    reuses its last stage, evaluated before projection, in the next step: the mismatch
+    is of the size of the projection (the local error), so the order is unaffected.
+
+    Attributes:
+        solver: the wrapped diffrax solver (any; ``isinstance`` checks see through it).
+        formulation: the formulation whose
+            :meth:`~jrigid.formulations.AbstractFormulation.project` is applied.
+        invariants: the values to restore (:class:`~jrigid.invariants.Invariants`), or
+            ``None`` for the constraint manifold only.
+    """
+
+    solver: diffrax.AbstractSolver
+    formulation: AbstractFormulation = eqx.field(static=True)
+    invariants: Invariants | None = None
+
+    @property
+    def term_structure(self):
+        return self.solver.term_structure
+
+    @property
+    def interpolation_cls(self):  # pyright: ignore
+        return self.solver.interpolation_cls
+
+    @property
+    def term_compatible_contr_kwargs(self):
+        return self.solver.term_compatible_contr_kwargs
+
+    @property
+    def root_finder(self):
+        """The wrapped implicit solver's root finder (diffrax sets its tolerances)."""
+        return self.solver.root_finder
+
+    @property
+    def root_find_max_steps(self):
+        return self.solver.root_find_max_steps
+
+    @property
+    def scan_kind(self):
+        """The wrapped Runge–Kutta solver's ``scan_kind`` (diffrax sets it for forward mode)."""
+        return self.solver.scan_kind
+
+    def order(self, terms):
+        return self.solver.order(terms)
+
+    def strong_order(self, terms):
+        return self.solver.strong_order(terms)
+
+    def error_order(self, terms):
+        return self.solver.error_order(terms)
+
+    def init(self, terms, t0, t1, y0, args):
+        return self.solver.init(terms, t0, t1, y0, args)
+
+    def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
+        y1, y_error, dense_info, solver_state, result = self.solver.step(
+            terms, t0, t1, y0, args, solver_state, made_jump
+        )
+        y1 = self.formulation.project(y1, args, self.invariants)
+        if isinstance(dense_info, dict) and "y1" in dense_info:
+            dense_info = dict(dense_info, y1=y1)
+        return y1, y_error, dense_info, solver_state, result
+
+    def func(self, terms, t0, y0, args):
+        return self.solver.func(terms, t0, y0, args)
+
+    def save(self, t, y, args):
+        """``SaveAt`` function: project an interpolated output the same way."""
+        return self.formulation.project(y, args, self.invariants)
+
+
+def projected(solver, formulation, invariants, saveat: diffrax.SaveAt):
+    """``solver`` wrapped in :class:`ProjectedSolver`, and ``saveat`` projecting its outputs.
+
+    Args:
+        solver: the diffrax solver to wrap.
+        formulation: whose :meth:`~jrigid.formulations.AbstractFormulation.project` is
+            applied after every step and to every saved output.
+        invariants: the values to restore, or ``None`` for the constraints only.
+        saveat: a ``diffrax.SaveAt`` with one ``SubSaveAt``.
+
+    Returns:
+        ``(solver, saveat)``.
+    """
+    solver = ProjectedSolver(solver, formulation, invariants)
+    return solver, eqx.tree_at(lambda s: s.subs.fn, saveat, solver.save)
+
+
+@functools.cache
+def _instance(cls):
+    """One shared default instance of an option class (modules are immutable)."""
+    return cls()
+
+
+def solver_options(solver, adjoint, max_steps, dt0, default=None):
+    """Defaults and checks of a numerical solve's options: ``(solver, adjoint, dt0, max_steps)``.
+
+    ``solver`` defaults to ``default()`` (:data:`DEFAULT_SOLVER`), ``adjoint`` to
+    ``diffrax.RecursiveCheckpointAdjoint()``; ``ValueError`` for a non-diffrax solver, a
+    ``max_steps`` that is not a positive int (``bool`` is refused, NumPy integers are
+    accepted, and returned as a Python ``int``: diffrax needs it static) or a concrete
+    ``dt0`` that is not finite and positive.
+    """
+    if solver is None:
+        solver = _instance(DEFAULT_SOLVER if default is None else default)
+    if not isinstance(solver, diffrax.AbstractSolver):
+        raise ValueError(f"solver must be a diffrax solver, got {solver!r}")
+    adjoint = _instance(diffrax.RecursiveCheckpointAdjoint) if adjoint is None else adjoint
+    if not isinstance(adjoint, diffrax.AbstractAdjoint):
+        raise ValueError(f"adjoint must be a diffrax adjoint, got {adjoint!r}")
+    if (
+        isinstance(max_steps, bool)
+        or not isinstance(max_steps, (int, np.integer))
+        or max_steps < 1
+    ):
+        raise ValueError(f"max_steps must be a positive int, got {max_steps!r}")
+    if dt0 is not None:
+        dt0 = jnp.asarray(dt0, dtype=jnp.result_type(float))
+        if dt0.shape != ():
+            raise ValueError(f"dt0 must be a scalar, got shape {dt0.shape}")
+        if not is_traced(dt0) and not bool(jnp.isfinite(dt0) & (dt0 > 0)):
+            raise ValueError(f"dt0 must be finite and > 0, got {dt0}")
+    return solver, adjoint, dt0, int(max_steps)
+
+
+def controller(ts, rtol, atol, norm=None) -> diffrax.PIDController:
+    """The PID step-size controller of every jrigid solve (``norm``: diffrax's default RMS).
+
+    ``dtmin`` is ``4 eps max(|t0|, |t1|)`` without forcing: a smaller step ends the solve
+    with ``dt_min_reached`` (:attr:`~jrigid.trajectory.Result.step_size_collapse` or ``nonfinite``).
+    """
+    eps = jnp.finfo(ts.dtype).eps
+    extra = {} if norm is None else {"norm": norm}
+    return diffrax.PIDController(
+        rtol=rtol,
+        atol=atol,
+        dtmin=4 * eps * jnp.maximum(jnp.abs(ts[0]), jnp.abs(ts[-1])),
+        force_dtmin=False,
+        **extra,
+    )
+
+
+def run(formulation, solver, ts, dt0, y0, scene, *, saveat, stepsize_controller, adjoint,
+        max_steps, event=None) -> diffrax.Solution:
+    """``diffrax.diffeqsolve`` of ``formulation``'s vector field over ``ts[0] → ts[-1]``.
+
+    The scene is the vector field's ``args``, and the solve never throws
+    (``throw=False``): its outcome becomes a :class:`~jrigid.trajectory.Result` code in
+    :func:`jrigid.solve.finish` or :func:`jrigid.solve.classify`.
+    """
+    return diffrax.diffeqsolve(
+        diffrax.ODETerm(formulation.vector_field),
+        solver,
+        ts[0],
+        ts[-1],
+        dt0,
+        y0,
+        args=scene,
+        saveat=saveat,
+        stepsize_controller=stepsize_controller,
+        adjoint=adjoint,
+        event=event,
+        max_steps=max_steps,
+        throw=False,
+    )
