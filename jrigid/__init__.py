@@ -76,14 +76,17 @@ if TYPE_CHECKING:
     from jrigid import (  # noqa: F401
         affine,
         body,
+        camera,
         cli,
         closed_form,
         contact,
         demo,
         ensemble,
         exact,
+        experiment_parameters,
         fit,
         formulations,
+        impacts,
         inertia,
         initial,
         integrate,
@@ -112,9 +115,9 @@ if TYPE_CHECKING:
         QuaternionAcceleration,
         QuaternionOmega,
     )
-    from jrigid.integrate import Result, SimulationError, simulate  # noqa: F401
+    from jrigid.integrate import simulate  # noqa: F401
     from jrigid.scene import FreeFlight, FreeRotation, Gravity, Pivot, Scene, Torque  # noqa: F401
     from jrigid.solve import PrecisionWarning  # noqa: F401
     from jrigid.splitting import Splitting  # noqa: F401
     from jrigid.state import Kinematics, State  # noqa: F401
-    from jrigid.trajectory import Trajectory  # noqa: F401
+    from jrigid.trajectory import Result, SimulationError, Trajectory  # noqa: F401
