@@ -272,10 +272,12 @@ def map_member(
         >>> jax.config.update("jax_enable_x64", True)
         >>> from jrigid import stability
         >>> moments = jnp.array([1.0, 2.0, 3.0])
-        >>> omega0 = stability.omega_at_energy(
-        ...     jnp.array([[0.05, 1.0, 0.05], [0.05, 0.05, 1.0]]), moments, 1.0)
+        >>> directions = jnp.array([[0.05, 1.0, 0.05], [0.05, 0.05, 1.0]])
         >>> ts = jnp.linspace(0.0, 30.0, 61)
-        >>> out = jax.vmap(lambda w: stability.map_member(moments, w, ts, 10.0))(omega0)
+        >>> def member(d):
+        ...     omega0 = stability.omega_at_energy(d, moments, 1.0)
+        ...     return stability.map_member(moments, omega0, ts, 10.0)
+        >>> out = jax.jit(jax.vmap(member))(directions)
         >>> out["axis"].tolist(), out["flips"].tolist(), out["flips_expected"].tolist()
         ([1, 2], [2, 0], [True, False])
         >>> bool(out["ftle"][0] > 5 * out["ftle"][1])
@@ -310,16 +312,8 @@ def flip_time_asymptotic(
 
     :func:`jrigid.theory.flip_interval_asymptotic` (the derivation is there): spin
     ``|ω| = speed`` about the intermediate axis tilted by ``ε`` toward the largest (or
-    smallest) axis.
-
-    Args:
-        moments: ``(3,)`` distinct principal moments, any order.
-        speed: ``()`` ``|ω|``.
-        eps: ``(...)`` tilt angle(s) in radians.
-        toward: ``"largest"`` or ``"smallest"`` (static).
-
-    Returns:
-        ``(T, λ, C)``: ``T`` of the shape of ``eps``, ``λ`` and ``C`` scalars.
+    smallest) axis; arguments and result as there: ``(T, λ, C)``, ``T`` of the shape of
+    ``eps``.
     """
     from jrigid.theory import flip_interval_asymptotic
 
