@@ -11,22 +11,18 @@ from __future__ import annotations
 
 import json
 import os
-import pathlib
 import signal
-import subprocess
-import sys
-import textwrap
 import time
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _ensemble import python as _python
 
 from jrigid import RigidBody, Scene, ensemble, initial
 
 MOMENTS = (1.0, 2.0, 3.0)
-ROOT = pathlib.Path(__file__).resolve().parents[1]
 
 
 def rotor(member):
@@ -310,23 +306,6 @@ def test_float32(float32):
     out = ensemble.run(rotor, inputs, chunk_size=3, progress=False)
     assert out["omega"].dtype == np.float32
     assert_identical(out, straight(rotor, inputs))
-
-
-def _python(code: str, **env) -> subprocess.Popen:
-    full = {**os.environ, "JAX_PLATFORMS": "cpu", **env}
-    return subprocess.Popen(
-        [sys.executable, "-c", _PRELUDE + textwrap.dedent(code)],
-        env=full, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )
-
-
-_PRELUDE = f"""
-import sys, time, numpy as np, jax
-jax.config.update("jax_enable_x64", True)
-sys.path.insert(0, {str(ROOT / "tests")!r})
-from test_ensemble import rotor, rotor_inputs
-from jrigid import ensemble
-"""
 
 
 def test_sharded_over_four_devices_equals_single_device(tmp_path):

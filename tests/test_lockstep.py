@@ -16,7 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from test_ensemble import _python
+from _ensemble import python as _python
 
 from jrigid import RigidBody, Scene, SimulationError, State, ensemble, exact, initial, simulate
 from jrigid.ensemble import simulate_lockstep
