@@ -1,4 +1,5 @@
-"""simulate: solvers, formulations, leapfrog, transformations, free flight, failures."""
+"""integrate: simulate — solvers, transformations (jit, vmap, grad), constraints, failures,
+options."""
 
 import logging
 import warnings
@@ -10,59 +11,32 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 import pytest
-from scipy.spatial.transform import Rotation
-from scipy.stats import linregress
+from _simulate import (
+    MOMENTS,
+    N_OUT,
+    OMEGA0,
+    Q0,
+    TS,
+    free_scene,
+    power_scene,
+    same_rotation,
+    top_scene,
+)
+from _simulate import free_reference as _free_reference
 
 from jrigid import initial
 from jrigid import quaternion as quat
 from jrigid.body import RigidBody
 from jrigid.formulations import EulerAngles
 from jrigid.integrate import Result, SimulationError, simulate
-from jrigid.leapfrog import leapfrog
-from jrigid.scene import FreeFlight, Gravity, Pivot, Scene, Torque
-from jrigid.solve import PrecisionWarning, precision_problem
+from jrigid.scene import FreeFlight, Scene
+from jrigid.solve import PrecisionWarning
 from jrigid.state import State
-
-N_OUT = 201  # shared with test_dynamics_analytic so compiled solves are reused
-MOMENTS = jnp.array([1.0, 2.0, 3.0])
-
-
-def scipy_rot(q):
-    return Rotation.from_quat(np.array(q, dtype=float), scalar_first=True)
-
-
-def same_rotation(q1, q2, atol):
-    sign = np.sign(np.sum(np.asarray(q1) * np.asarray(q2), axis=-1))[..., None]
-    np.testing.assert_allclose(sign * np.asarray(q1), np.asarray(q2), atol=atol)
-
-
-def free_scene():
-    return Scene(RigidBody(MOMENTS))
-
-
-def top_scene():
-    body = RigidBody(jnp.array([0.5, 0.5, 0.8]), com=jnp.array([0.0, 0.0, 1.0]))
-    return Scene(body, Pivot(), Gravity(1.0))
-
-
-# q0 tilts body axis 3 well away from space z so ZXZ Euler angles stay regular.
-Q0 = jnp.array(Rotation.from_euler("ZXZ", [0.2, 1.2, -0.4]).as_quat(scalar_first=True))
-OMEGA0 = jnp.array([0.2, 0.3, 1.5])  # near the stable axis 3: θ stays away from 0 and π
-TS = jnp.linspace(0.0, 10.0, N_OUT)
 
 
 @pytest.fixture(scope="module")
 def free_reference():
-    """Dopri8 at rtol 1e-12; checked against scipy DOP853 in test_dynamics_analytic."""
-    return simulate(free_scene(), initial.from_omega(Q0, OMEGA0), TS,
-                    solver=diffrax.Dopri8(), rtol=1e-12, atol=1e-14)
-
-
-@pytest.fixture(scope="module")
-def top_reference():
-    state = initial.from_euler_rates([0.0, 0.6, 0.0], [0.3, 0.0, 5.0])
-    traj = simulate(top_scene(), state, TS, solver=diffrax.Dopri8(), rtol=1e-12, atol=1e-14)
-    return state, traj
+    return _free_reference()
 
 
 # --------------------------------------------------------------------------- solvers
@@ -88,92 +62,6 @@ def test_every_solver(free_reference, solver, rtol, tol):
     stats = {k: int(v) for k, v in traj.stats.items()}
     assert stats["num_steps"] == stats["num_accepted_steps"] + stats["num_rejected_steps"]
     assert stats["num_accepted_steps"] > 0
-
-
-# --------------------------------------------------------------------------- formulations
-
-
-@pytest.mark.parametrize(
-    "formulation", ["quaternion_acceleration", "quaternion_omega", "body_omega", "euler_angles"]
-)
-def test_formulations_agree_free_rotor(free_reference, formulation):
-    traj = simulate(free_scene(), initial.from_omega(Q0, OMEGA0), TS,
-                    formulation=formulation, rtol=1e-10, atol=1e-12)
-    assert int(traj.result) == 0
-    np.testing.assert_allclose(traj.omega, free_reference.omega, atol=1e-8)
-    np.testing.assert_allclose(traj.L, free_reference.L, atol=1e-8)
-    if formulation == "body_omega":
-        assert traj.q is None and traj.L_space is None
-        with pytest.raises(ValueError, match="orientation"):
-            traj.euler("ZXZ")
-    else:
-        same_rotation(traj.q, free_reference.q, 1e-8)
-        np.testing.assert_allclose(traj.L_space, free_reference.L_space, atol=1e-8)
-
-
-@pytest.mark.parametrize("formulation", ["quaternion_acceleration", "quaternion_omega",
-                                         "euler_angles", "leapfrog"])
-def test_formulations_agree_heavy_top(top_reference, formulation):
-    state, ref = top_reference
-    if formulation == "leapfrog":
-        traj, tol = leapfrog(top_scene(), state, TS, dt=1e-3), 1e-4
-    else:
-        traj, tol = simulate(top_scene(), state, TS, formulation=formulation,
-                             rtol=1e-10, atol=1e-12), 1e-7
-    assert int(traj.result) == 0
-    np.testing.assert_allclose(traj.omega, ref.omega, atol=tol)
-    same_rotation(traj.q, ref.q, tol)
-    np.testing.assert_allclose(traj.energy, ref.energy[0], atol=tol)
-
-
-def test_trajectory_quantities_are_consistent(free_reference):
-    traj = free_reference
-    R = scipy_rot(traj.q).as_matrix()
-    np.testing.assert_allclose(traj.axes, R, atol=1e-12)
-    np.testing.assert_allclose(traj.omega_space, np.einsum("tij,tj->ti", R, traj.omega),
-                               atol=1e-12)
-    np.testing.assert_allclose(traj.L, np.asarray(traj.omega) * np.asarray(MOMENTS), atol=1e-12)
-    np.testing.assert_allclose(
-        traj.euler("zyx"), scipy_rot(traj.q).as_euler("zyx"), atol=1e-10
-    )
-    np.testing.assert_allclose(
-        traj.kinetic_energy, 0.5 * np.sum(np.asarray(traj.omega) * np.asarray(traj.L), -1),
-        rtol=1e-12,
-    )
-    assert traj.x is None and traj.v is None
-
-
-# --------------------------------------------------------------------------- leapfrog
-
-
-def _leapfrog_errors(variant, top_reference):
-    state, ref = top_reference
-    ts = TS[:41]  # t ∈ [0, 2]
-    errors, dts = [], []
-    for k in (2, 4, 8, 16):
-        dt = 0.05 / k  # divides the output spacing
-        traj = leapfrog(top_scene(), state, ts, dt=dt, variant=variant)
-        assert int(traj.stats["num_steps"]) == 40 * k
-        errors.append(np.max(np.abs(np.asarray(traj.omega[-1]) - np.asarray(ref.omega[40]))))
-        dts.append(dt)
-    return linregress(np.log(dts), np.log(errors)).slope
-
-
-def test_leapfrog_order_two(top_reference):
-    slope = _leapfrog_errors("midpoint", top_reference)
-    assert 1.9 < slope < 2.1
-
-
-def test_leapfrog_chapter_listing_is_first_order(top_reference):
-    """The listing evaluates q̇ at q(t) instead of q(t + Δt/2): first order."""
-    slope = _leapfrog_errors("chapter", top_reference)
-    assert 0.9 < slope < 1.1
-
-
-def test_leapfrog_renormalises(top_reference):
-    state, _ = top_reference
-    traj = leapfrog(top_scene(), state, TS, dt=0.05)
-    assert np.max(np.abs(np.asarray(traj.norm_error))) < 1e-14
 
 
 # --------------------------------------------------------------------------- transformations
@@ -291,29 +179,6 @@ def test_tolerance_change_does_not_recompile(caplog):
     assert not [r for r in caplog.records if "Compiling" in r.message and "_solve" in r.message]
 
 
-# --------------------------------------------------------------------------- free flight
-
-
-def test_free_flight_parabola_and_torque_free_rotation():
-    g = jnp.array([0.0, 0.0, -9.81])
-    I1, I3 = 1.0, 1.6
-    body = RigidBody(jnp.array([I1, I1, I3]), mass=2.0)
-    scene = Scene(body, FreeFlight(), Gravity(g))
-    x0, v0 = jnp.array([0.0, 1.0, 2.0]), jnp.array([3.0, 0.0, 10.0])
-    w_perp, w3 = 0.5, 3.0
-    state = initial.from_omega(None, [w_perp, 0.0, w3], x=x0, v=v0)
-    ts = jnp.linspace(0.0, 2.0, 41)
-    traj = simulate(scene, state, ts, rtol=1e-11, atol=1e-12)
-    t = np.asarray(ts)[:, None]
-    x0, v0, g = (np.asarray(a)[None, :] for a in (x0, v0, g))
-    np.testing.assert_allclose(traj.x, x0 + v0 * t + 0.5 * g * t**2, atol=1e-9)
-    np.testing.assert_allclose(traj.v, v0 + g * t, atol=1e-9)
-    Omega = (I3 / I1 - 1) * w3  # torque-free symmetric precession (17.47)
-    np.testing.assert_allclose(traj.omega[:, 0], w_perp * np.cos(Omega * t[:, 0]), atol=1e-9)
-    np.testing.assert_allclose(traj.omega[:, 1], w_perp * np.sin(Omega * t[:, 0]), atol=1e-9)
-    np.testing.assert_allclose(traj.energy, traj.energy[0], rtol=1e-10)
-
-
 # --------------------------------------------------------------------------- constraints
 
 
@@ -329,22 +194,6 @@ def test_projection_bounds_constraint_drift():
     assert drift[True] < 1e-6
 
 
-def test_dense_output():
-    from test_dynamics_analytic import reference_free_rotor
-
-    state = initial.from_omega(Q0, OMEGA0)
-    traj = simulate(free_scene(), state, TS, rtol=1e-10, atol=1e-12, dense=True)
-    t_mid = np.asarray(TS[1:]) - 0.0123
-    at = traj.at(t_mid)
-    w_ref, q_ref = reference_free_rotor(np.asarray(MOMENTS), np.asarray(OMEGA0),
-                                        np.asarray(Q0), np.concatenate([[0.0], t_mid]))
-    np.testing.assert_allclose(at.ts, t_mid)
-    np.testing.assert_allclose(at.omega, w_ref[1:], atol=1e-8)
-    same_rotation(at.q, q_ref[1:], 1e-8)
-    with pytest.raises(ValueError, match="dense"):
-        simulate(free_scene(), state, TS).at(t_mid)
-
-
 def test_float32(float32):
     state = initial.from_omega(Q0.astype(jnp.float32), OMEGA0.astype(jnp.float32))
     with warnings.catch_warnings():
@@ -356,36 +205,6 @@ def test_float32(float32):
     assert np.max(np.abs(e - e[0])) < 1e-5 * e[0]
     with pytest.raises(ValueError, match="machine epsilons"):
         simulate(free_scene(), state, jnp.linspace(0.0, 1.0, 3), rtol=1e-8)
-
-
-def test_float32_warns_once_when_the_horizon_defeats_the_tolerance(float32):
-    """|ω| t_end eps32 = 1.54 · 1e3 · 1.2e-7 = 1.8e-4 > rtol = 1e-5: one warning, at the
-    caller's line, and the solve still runs."""
-    state = initial.from_omega(Q0.astype(jnp.float32), OMEGA0.astype(jnp.float32))
-    with pytest.warns(PrecisionWarning, match=r"float32 resolves times near t = 1000") as got:
-        traj = simulate(free_scene(), state, jnp.linspace(0.0, 1000.0, 21))
-    assert len(got) == 1 and got[0].filename == __file__
-    assert int(traj.result) == 0
-
-
-def test_precision_problem_threshold():
-    """The floor |ω| max|t| eps against rtol; float64 and traced inputs are never examined."""
-    omega = np.array([0.0, 0.0, 2.0])
-    eps32 = float(np.finfo(np.float32).eps)
-    state = initial.from_omega(omega=jnp.asarray(omega, jnp.float32))
-    rtol = jnp.asarray(1e-5, jnp.float32)
-    t_edge = 1e-5 / (2.0 * eps32)  # floor = rtol here
-    for t_end, warns in ((0.9 * t_edge, False), (1.1 * t_edge, True)):
-        ts = jnp.asarray([-1.0, t_end], jnp.float32)
-        assert (precision_problem(state, ts, rtol) is not None) == warns
-    ts = jnp.asarray([-1.1 * t_edge, 0.0], jnp.float32)  # |t0| counts as well
-    assert "coarser than rtol = 1e-05 asks" in precision_problem(state, ts, rtol)
-    tiny_rtol = jnp.asarray(1e-7, jnp.float32)  # below 10 eps: refused by the checks instead
-    assert precision_problem(state, ts, tiny_rtol) is None
-    state64 = initial.from_omega(omega=jnp.asarray(omega))
-    assert precision_problem(state64, jnp.asarray([0.0, 1e12]), jnp.asarray(1e-10)) is None
-    traced = jax.jit(lambda s: precision_problem(s, ts, rtol) is None)
-    assert traced(state)
 
 
 # --------------------------------------------------------------------------- bad input
@@ -422,16 +241,6 @@ def test_bad_inputs_raise_value_errors():
         simulate(Scene(RigidBody(jnp.array([1.0, 1.0, 3.0]))), state, TS)
 
 
-def test_nonphysical_body_allowed_when_asked():
-    moments = jnp.array([2.0, 1.0, 2.0 / 3.0])  # Hairer–Lubich–Wanner
-    allowed = RigidBody(moments, allow_nonphysical=True)
-    checked = jax.jit(lambda b: b.check())(allowed)  # simulate runs this inside its jit
-    np.testing.assert_allclose(checked.moments, moments)
-    strict = eqx.filter_jit(lambda m: RigidBody(m).check().moments)
-    with pytest.raises(eqx.EquinoxRuntimeError, match="triangle"):
-        jax.block_until_ready(strict(moments))
-
-
 # --------------------------------------------------------------------------- failures
 
 
@@ -451,29 +260,9 @@ def test_max_steps_exhausted():
     assert np.all(np.isfinite(q[before])) and np.all(np.isnan(q[~before]))
 
 
-def _power_torque(t, kin, params):
-    """c |ω|^(2 power) ω, turning NaN after t_nan (one function: one compiled solve)."""
-    w2 = jnp.dot(kin.omega, kin.omega)
-    nan_after = jnp.where(t > params["t_nan"], jnp.nan, 1.0)
-    return params["c"] * w2 ** params["power"] * kin.omega * nan_after
-
-
-def _power_scene(c, power, t_nan):
-    params = {"c": c, "power": power, "t_nan": t_nan}  # floats become traced arrays
-    return Scene(RigidBody(jnp.full(3, 2.0)), loads=(Torque(_power_torque, params),))
-
-
-def test_user_torque_damping_is_exponential():
-    """Spherical body, N = −c ω: ω(t) = ω0 exp(−c t / I)."""
-    traj = simulate(_power_scene(-0.3, 0.0, np.inf), initial.from_omega(Q0, OMEGA0), TS,
-                    rtol=1e-10, atol=1e-12)
-    decay = np.exp(-0.3 * np.asarray(TS) / 2.0)[:, None]
-    np.testing.assert_allclose(traj.omega, np.asarray(OMEGA0)[None, :] * decay, atol=1e-9)
-
-
 def test_nonfinite_torque_reported():
     with pytest.raises(SimulationError, match="non-finite") as info:
-        simulate(_power_scene(-0.3, 0.0, 3.0), initial.from_omega(Q0, OMEGA0), TS)
+        simulate(power_scene(-0.3, 0.0, 3.0), initial.from_omega(Q0, OMEGA0), TS)
     assert "t=3" in str(info.value)
 
 
@@ -481,9 +270,9 @@ def test_step_size_collapse_reported():
     """N = k |ω|² ω blows up at t* = I / (2 k |ω0|²) = 2: a singular solution."""
     state = initial.from_omega(None, jnp.array([1.0, 0.0, 0.0]))
     with pytest.raises(SimulationError, match="step size collapsed") as info:
-        simulate(_power_scene(0.5, 1.0, np.inf), state, TS)
+        simulate(power_scene(0.5, 1.0, np.inf), state, TS)
     assert "t=2" in str(info.value)
-    traj = simulate(_power_scene(0.5, 1.0, np.inf), state, TS, throw=False)
+    traj = simulate(power_scene(0.5, 1.0, np.inf), state, TS, throw=False)
     assert int(traj.result) == Result.step_size_collapse
     assert abs(float(traj.t_stop) - 2.0) < 1e-6
 

@@ -1,0 +1,173 @@
+"""formulations: every formulation's vector field, its variables, and the motions they give.
+
+The vector fields are compared with Euler's equations written out independently (numpy,
+scipy rotations); whole motions with a Dopri8 reference at rtol 1e-12.
+"""
+
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from _simulate import (
+    OMEGA0,
+    Q0,
+    TS,
+    free_scene,
+    same_rotation,
+    top_scene,
+)
+from _simulate import free_reference as _free_reference
+from _simulate import top_reference as _top_reference
+from scipy.spatial.transform import Rotation
+
+from jrigid import initial
+from jrigid.body import RigidBody
+from jrigid.formulations import FORMULATIONS, get_formulation
+from jrigid.integrate import simulate
+from jrigid.leapfrog import leapfrog
+from jrigid.scene import Gravity, Pivot, Scene, Torque
+
+
+@pytest.fixture(scope="module")
+def free_reference():
+    return _free_reference()
+
+
+@pytest.fixture(scope="module")
+def top_reference():
+    return _top_reference()
+
+
+# --------------------------------------------------------------------------- formulations agree
+
+
+@pytest.mark.parametrize(
+    "formulation", ["quaternion_acceleration", "quaternion_omega", "body_omega", "euler_angles"]
+)
+def test_formulations_agree_free_rotor(free_reference, formulation):
+    traj = simulate(free_scene(), initial.from_omega(Q0, OMEGA0), TS,
+                    formulation=formulation, rtol=1e-10, atol=1e-12)
+    assert int(traj.result) == 0
+    np.testing.assert_allclose(traj.omega, free_reference.omega, atol=1e-8)
+    np.testing.assert_allclose(traj.L, free_reference.L, atol=1e-8)
+    if formulation == "body_omega":
+        assert traj.q is None and traj.L_space is None
+        with pytest.raises(ValueError, match="orientation"):
+            traj.euler("ZXZ")
+    else:
+        same_rotation(traj.q, free_reference.q, 1e-8)
+        np.testing.assert_allclose(traj.L_space, free_reference.L_space, atol=1e-8)
+
+
+@pytest.mark.parametrize("formulation", ["quaternion_acceleration", "quaternion_omega",
+                                         "euler_angles", "leapfrog"])
+def test_formulations_agree_heavy_top(top_reference, formulation):
+    state, ref = top_reference
+    if formulation == "leapfrog":
+        traj, tol = leapfrog(top_scene(), state, TS, dt=1e-3), 1e-4
+    else:
+        traj, tol = simulate(top_scene(), state, TS, formulation=formulation,
+                             rtol=1e-10, atol=1e-12), 1e-7
+    assert int(traj.result) == 0
+    np.testing.assert_allclose(traj.omega, ref.omega, atol=tol)
+    same_rotation(traj.q, ref.q, tol)
+    np.testing.assert_allclose(traj.energy, ref.energy[0], atol=tol)
+
+
+# --------------------------------------------------------------------------- vector fields
+
+RNG = np.random.default_rng(17)
+TORQUE_BODY = np.array([0.3, -0.2, 0.5])
+COM = np.array([0.0, 0.0, 0.7])  # a pivoted body's centre of mass, on principal axis 3
+
+
+def _hamilton(p, q):
+    """Quaternion product (w, x, y, z), written out."""
+    p0, pv, q0, qv = p[0], np.asarray(p[1:]), q[0], np.asarray(q[1:])
+    return np.concatenate([[p0 * q0 - pv @ qv], p0 * qv + q0 * pv + np.cross(pv, qv)])
+
+
+def _constant_torque(t, kin, params):
+    return params
+
+
+def _scenes():
+    """(name, scene, body-frame torque(q)): a torque-driven free body and a pivoted top."""
+    body = RigidBody(jnp.array([1.0, 2.0, 2.5]))
+    driven = Scene(body, loads=(Torque(_constant_torque, jnp.asarray(TORQUE_BODY)),))
+    top = Scene(RigidBody(jnp.array([1.0, 1.2, 0.6]), mass=1.5, com=jnp.asarray(COM)),
+                Pivot(), Gravity(9.81))
+
+    def gravity_torque(q):  # r × (Rᵀ M g) about the pivot, body frame
+        weight = Rotation.from_quat(q, scalar_first=True).inv().apply([0.0, 0.0, -1.5 * 9.81])
+        return np.cross(COM, weight)
+
+    return [("driven", driven, lambda q: TORQUE_BODY, np.array([1.0, 2.0, 2.5])),
+            ("top", top, gravity_torque,
+             np.array([1.0, 1.2, 0.6]) + 1.5 * (COM @ COM - COM * COM))]  # parallel axis
+
+
+def _euler_rhs(moments, omega, torque):
+    """Euler's equations ω̇ = I⁻¹(−ω × Iω + τ) (17.34/17.35)."""
+    return (np.cross(-omega, moments * omega) + torque) / moments
+
+
+@pytest.mark.parametrize("case", [0, 1], ids=["driven", "top"])
+@pytest.mark.parametrize("name", list(FORMULATIONS))
+def test_vector_field_is_eulers_equations(name, case):
+    label, scene, torque, moments = _scenes()[case]
+    formulation = FORMULATIONS[name]()
+    if name == "body_omega" and label == "top":
+        with pytest.raises(ValueError, match="orientation"):
+            formulation.check_scene(scene)
+        return
+    q = Rotation.random(random_state=RNG).as_quat(scalar_first=True)
+    omega = RNG.normal(size=3)
+    state = initial.from_omega(jnp.asarray(q), jnp.asarray(omega))
+    y = formulation.from_state(scene, state)
+    dy = formulation.vector_field(0.0, y, scene)
+    expected = _euler_rhs(moments, omega, torque(q))
+    if name == "quaternion_acceleration":
+        # q̇ = ½ q ⊗ (0, ω) (17.44) and q̈ = ½ q̇ ⊗ (0, ω) + ½ q ⊗ (0, ω̇) (17.50)
+        qdot = 0.5 * _hamilton(q, np.concatenate([[0.0], omega]))
+        qddot = (0.5 * _hamilton(qdot, np.concatenate([[0.0], omega]))
+                 + 0.5 * _hamilton(q, np.concatenate([[0.0], expected])))
+        np.testing.assert_allclose(dy.q, qdot, atol=1e-13)
+        np.testing.assert_allclose(dy.qdot, qddot, atol=1e-12)
+    elif name == "quaternion_omega":
+        np.testing.assert_allclose(dy.q, 0.5 * _hamilton(q, np.concatenate([[0.0], omega])),
+                                   atol=1e-13)
+        np.testing.assert_allclose(dy.omega, expected, atol=1e-12)
+    elif name == "body_omega":
+        np.testing.assert_allclose(dy, expected, atol=1e-12)
+    else:  # euler_angles: ω = (φ̇ sθ sψ + θ̇ cψ, φ̇ sθ cψ − θ̇ sψ, φ̇ cθ + ψ̇) (17.36)
+        np.testing.assert_allclose(dy.omega, expected, atol=1e-12)
+        _, th, ps = np.asarray(y.angles)
+        dphi, dth, dps = np.asarray(dy.angles)
+        from_rates = [dphi * np.sin(th) * np.sin(ps) + dth * np.cos(ps),
+                      dphi * np.sin(th) * np.cos(ps) - dth * np.sin(ps),
+                      dphi * np.cos(th) + dps]
+        np.testing.assert_allclose(from_rates, omega, atol=1e-12)
+
+
+@pytest.mark.parametrize("name", list(FORMULATIONS))
+def test_from_state_and_back(name):
+    """A state turned into the formulation's variables gives back its q (as a rotation)
+    and its ω through ``kinematics``."""
+    formulation = FORMULATIONS[name]()
+    scene = free_scene()
+    q = Rotation.random(random_state=RNG).as_quat(scalar_first=True)
+    omega = RNG.normal(size=3)
+    state = initial.from_omega(jnp.asarray(q), jnp.asarray(omega))
+    kin = formulation.kinematics(scene, formulation.from_state(scene, state))
+    np.testing.assert_allclose(kin.omega, omega, atol=1e-13)
+    if formulation.has_orientation:
+        same_rotation(kin.q, q, 1e-13)
+    else:
+        assert kin.q is None
+
+
+def test_unknown_formulation_names_the_choices():
+    assert get_formulation("quaternion_omega") is get_formulation("quaternion_omega")
+    with pytest.raises(ValueError, match="unknown formulation 'matrix'.*body_omega"):
+        get_formulation("matrix")
