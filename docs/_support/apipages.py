@@ -57,11 +57,27 @@ def _private_exports(root: Path, package: str) -> list[str]:
     tree = ast.parse(init.read_text(encoding="utf-8"))
     names = []
     for node in tree.body:
-        if isinstance(node, ast.ImportFrom) and node.module is not None:
+        if isinstance(node, ast.ImportFrom) and node.module not in (None, "__future__"):
             module = node.module.rsplit(".", 1)[-1]
-            if module.startswith("_"):
+            if not module.startswith("_"):
+                continue
+            if [a.name for a in node.names] == ["*"]:
+                names += _module_all(root / "jrigid" / package / f"{module}.py")
+            else:
                 names += [a.asname or a.name for a in node.names]
     return names
+
+
+def _module_all(path: Path) -> list[str]:
+    """The literal ``__all__`` list of the module at ``path``."""
+    import ast
+
+    for node in ast.parse(path.read_text(encoding="utf-8")).body:
+        if isinstance(node, ast.Assign) and any(
+            isinstance(t, ast.Name) and t.id == "__all__" for t in node.targets
+        ):
+            return list(ast.literal_eval(node.value))
+    return []
 
 
 def _page(root: Path, name: str) -> str:

@@ -33,20 +33,17 @@ computes every chunk together, so one lost process stops the run: an executor
 (``executor=``) is the sturdier way across hosts.
 """
 
-from jrigid.ensemble.executors import executor
-from jrigid.ensemble.lockstep import simulate_lockstep
-from jrigid.ensemble.many import SWEEP_DEFAULTS, SweepWarning, default_summary, simulate_many
-from jrigid.ensemble.runner import run
-from jrigid.ensemble.schedule import difficulty_order, lockstep_efficiency
+from jrigid.ensemble import executors, lockstep, many, runner, schedule  # noqa: I001
+from jrigid.ensemble.executors import *  # noqa: F403
+from jrigid.ensemble.lockstep import *  # noqa: F403
+from jrigid.ensemble.many import *  # noqa: F403
+from jrigid.ensemble.runner import *  # noqa: F403
+from jrigid.ensemble.schedule import *  # noqa: F403
 
-__all__ = [
-    "SWEEP_DEFAULTS",
-    "SweepWarning",
-    "default_summary",
-    "difficulty_order",
-    "executor",
-    "lockstep_efficiency",
-    "run",
-    "simulate_lockstep",
-    "simulate_many",
-]
+# The package's names: each listed once, in the ``__all__`` of the module defining it.
+__all__: list[str] = []
+__all__ += executors.__all__
+__all__ += lockstep.__all__
+__all__ += many.__all__
+__all__ += runner.__all__
+__all__ += schedule.__all__

@@ -129,7 +129,11 @@ closed form holds for any positive moments) unless asked for with
 
 from __future__ import annotations
 
-from ._constants import ExactConstants, prepare
-from ._evaluate import evaluate, omega_period, solve
+from jrigid.exact import _constants, _evaluate  # noqa: I001
+from jrigid.exact._constants import *  # noqa: F403
+from jrigid.exact._evaluate import *  # noqa: F403
 
-__all__ = ["ExactConstants", "evaluate", "omega_period", "prepare", "solve"]
+# The package's names: each listed once, in the ``__all__`` of the module defining it.
+__all__: list[str] = []
+__all__ += _constants.__all__
+__all__ += _evaluate.__all__

@@ -22,6 +22,8 @@ from jrigid.special.kernels import rf_sqrt, rj_sqrt, safe_sqrt
 from ._arith import _clip, _distance_to_separatrix, _hypot, _safe_div, _unstack
 from ._taylor import _SERIES_ORDER, _SLOW, _taylor
 
+__all__ = ["ExactConstants", "prepare"]
+
 # Duplication steps for R_J(x, y, 1, p) with x, y in [0, 1], p in [1, 10⁴]: 12 reach full
 # float64 accuracy down to y = 1e-60 (distances to the separatrix far below rounding).
 _RJ_STEPS = 12

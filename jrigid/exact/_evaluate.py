@@ -25,6 +25,8 @@ from ._constants import (
 )
 from ._taylor import _SLOW, _series
 
+__all__ = ["evaluate", "omega_period", "solve"]
+
 
 def evaluate(consts: ExactConstants, t: ArrayLike) -> tuple[jax.Array, jax.Array]:
     """Orientation and angular velocity at times ``t`` (any shape ``S``).

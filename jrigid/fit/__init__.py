@@ -58,71 +58,21 @@ Example: moment ratios and initial spin of a tumbling body from a noisy gyroscop
     True
 """
 
-from jrigid.fit import features
-from jrigid.fit.driver import FitResult, fit
-from jrigid.fit.features import *  # noqa: F403 - every name of features.__all__, added below
-from jrigid.fit.observations import (
-    AbstractObservation,
-    AxisDirections,
-    Gyroscope,
-    Observation,
-    Orientations,
-    Prediction,
-    axis_loss,
-    gyroscope_loss,
-    orientation_loss,
-)
-from jrigid.fit.params import (
-    inertia_tensor,
-    moment_ratios,
-    moment_ratios_raw,
-    moments,
-    moments_raw,
-    positive,
-    positive_raw,
-    unit_quaternion,
-)
-from jrigid.fit.problem import Exact, Invariants, Problem, Simulated
-from jrigid.fit.uncertainty import (
-    Laplace,
-    laplace,
-    parameter_names,
-    propagate,
-    residuals_and_jacobian,
-)
-from jrigid.fit.verdict import FitError, FitWarning
+from jrigid.fit import driver, features, observations, params, problem, uncertainty, verdict  # noqa: I001
+from jrigid.fit.driver import *  # noqa: F403
+from jrigid.fit.features import *  # noqa: F403
+from jrigid.fit.observations import *  # noqa: F403
+from jrigid.fit.params import *  # noqa: F403
+from jrigid.fit.problem import *  # noqa: F403
+from jrigid.fit.uncertainty import *  # noqa: F403
+from jrigid.fit.verdict import *  # noqa: F403
 
-__all__ = [
-    "AbstractObservation",
-    "AxisDirections",
-    "Exact",
-    "FitError",
-    "FitResult",
-    "FitWarning",
-    "Gyroscope",
-    "Invariants",
-    "Laplace",
-    "Observation",
-    "Orientations",
-    "Prediction",
-    "Problem",
-    "Simulated",
-    "axis_loss",
-    "fit",
-    "gyroscope_loss",
-    "inertia_tensor",
-    "laplace",
-    "moment_ratios",
-    "moment_ratios_raw",
-    "moments",
-    "moments_raw",
-    "orientation_loss",
-    "parameter_names",
-    "positive",
-    "positive_raw",
-    "propagate",
-    "residuals_and_jacobian",
-    "unit_quaternion",
-]
-# The derived features: every name of their own ``__all__``.
+# The package's names: each listed once, in the ``__all__`` of the module defining it.
+__all__: list[str] = []
+__all__ += driver.__all__
 __all__ += features.__all__
+__all__ += observations.__all__
+__all__ += params.__all__
+__all__ += problem.__all__
+__all__ += uncertainty.__all__
+__all__ += verdict.__all__

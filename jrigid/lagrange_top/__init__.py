@@ -83,19 +83,13 @@ quaternion raise ``ValueError`` for concrete input and ``equinox.error_if`` unde
 
 from __future__ import annotations
 
-from ._constants import TopConstants, prepare
-from ._evaluate import evaluate, nutation_period, nutation_range, solve
-from ._scenes import applies, check_scene, prepare_scene, scene_gravity
+from jrigid.lagrange_top import _constants, _evaluate, _scenes  # noqa: I001
+from jrigid.lagrange_top._constants import *  # noqa: F403
+from jrigid.lagrange_top._evaluate import *  # noqa: F403
+from jrigid.lagrange_top._scenes import *  # noqa: F403
 
-__all__ = [
-    "TopConstants",
-    "applies",
-    "check_scene",
-    "evaluate",
-    "nutation_period",
-    "nutation_range",
-    "prepare",
-    "prepare_scene",
-    "scene_gravity",
-    "solve",
-]
+# The package's names: each listed once, in the ``__all__`` of the module defining it.
+__all__: list[str] = []
+__all__ += _constants.__all__
+__all__ += _evaluate.__all__
+__all__ += _scenes.__all__

@@ -32,6 +32,8 @@ from ._phases import (
 )
 from ._roots import _roots, _safe_inv
 
+__all__ = ["TopConstants", "prepare"]
+
 
 class TopConstants(NamedTuple):
     """Per-top constants of the closed-form solution (a pytree; batch shape ``B``).

@@ -16,6 +16,8 @@ from jrigid.special.kernels import parity_sign, safe_sqrt
 from ._constants import TopConstants, prepare
 from ._phases import _partial, _partial_args, _quarter_shift, _reduce_4pi, _rj, _safe_rsqrt
 
+__all__ = ["evaluate", "nutation_period", "nutation_range", "solve"]
+
 
 def evaluate(consts: TopConstants, t: ArrayLike) -> tuple[jax.Array, jax.Array]:
     """Orientation and body angular velocity of the top at times ``t`` (any shape ``S``).

@@ -12,6 +12,8 @@ from jrigid.scene import Gravity, Pivot, Scene
 
 from ._constants import TopConstants, prepare
 
+__all__ = ["applies", "check_scene", "prepare_scene", "scene_gravity"]
+
 
 def _problems(scene: Scene) -> list[str]:
     """Why ``scene`` is not a Lagrange top (empty if it is)."""

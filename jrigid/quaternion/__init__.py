@@ -23,81 +23,17 @@ Bad input:
   concrete input and use ``equinox.error_if`` under ``jit``.
 """
 
-from .core import (
-    canonicalize,
-    conjugate,
-    distance,
-    from_axis_angle,
-    from_rotvec,
-    from_xyzw,
-    identity,
-    inverse,
-    multiply,
-    norm,
-    normalize,
-    rotate,
-    rotate_inverse,
-    slerp,
-    to_axis_angle,
-    to_rotvec,
-    to_xyzw,
-)
-from .euler import EULER_SEQUENCES, from_euler, gimbal_lock, to_euler
-from .kinematics import (
-    angular_velocity,
-    angular_velocity_space,
-    derivative,
-    derivative_space,
-    w_matrix,
-    w_matrix_space,
-)
-from .matrix import (
-    from_matrix,
-    passive_axis_matrix,
-    passive_matrix,
-    passive_zxz_matrix,
-    project_to_rotation,
-    rodrigues_matrix,
-    to_matrix,
-)
-from .validate import check_quaternion, check_rotation_matrix, default_atol
+from jrigid.quaternion import core, euler, kinematics, matrix, validate  # noqa: I001
+from jrigid.quaternion.core import *  # noqa: F403
+from jrigid.quaternion.euler import *  # noqa: F403
+from jrigid.quaternion.kinematics import *  # noqa: F403
+from jrigid.quaternion.matrix import *  # noqa: F403
+from jrigid.quaternion.validate import *  # noqa: F403
 
-__all__ = [
-    "EULER_SEQUENCES",
-    "angular_velocity",
-    "angular_velocity_space",
-    "canonicalize",
-    "check_quaternion",
-    "check_rotation_matrix",
-    "conjugate",
-    "default_atol",
-    "derivative",
-    "derivative_space",
-    "distance",
-    "from_axis_angle",
-    "from_euler",
-    "from_matrix",
-    "from_rotvec",
-    "from_xyzw",
-    "gimbal_lock",
-    "identity",
-    "inverse",
-    "multiply",
-    "norm",
-    "normalize",
-    "passive_axis_matrix",
-    "passive_matrix",
-    "passive_zxz_matrix",
-    "project_to_rotation",
-    "rodrigues_matrix",
-    "rotate",
-    "rotate_inverse",
-    "slerp",
-    "to_axis_angle",
-    "to_euler",
-    "to_matrix",
-    "to_rotvec",
-    "to_xyzw",
-    "w_matrix",
-    "w_matrix_space",
-]
+# The package's names: each listed once, in the ``__all__`` of the module defining it.
+__all__: list[str] = []
+__all__ += core.__all__
+__all__ += euler.__all__
+__all__ += kinematics.__all__
+__all__ += matrix.__all__
+__all__ += validate.__all__

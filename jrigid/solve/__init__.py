@@ -17,37 +17,13 @@ The result types themselves (``Trajectory``, ``Result``, ``SimulationError``) li
 :mod:`jrigid.trajectory`.
 """
 
-from jrigid.solve.inputs import (
-    TOLERANCE_CHECKS,
-    PrecisionWarning,
-    default_tolerances,
-    guard,
-    input_checks,
-    message,
-    normalised,
-    precision_problem,
-    prepare,
-    screen,
-    validate,
-    warn_precision,
-)
-from jrigid.solve.outcome import classify, finish, finish_sampled, raise_on_failure
-from jrigid.solve.stepping import (
-    DEFAULT_SOLVER,
-    ProjectedSolver,
-    controller,
-    projected,
-    run,
-    solver_options,
-)
+from jrigid.solve import inputs, outcome, stepping  # noqa: I001
+from jrigid.solve.inputs import *  # noqa: F403
+from jrigid.solve.outcome import *  # noqa: F403
+from jrigid.solve.stepping import *  # noqa: F403
 
-__all__ = [
-    # inputs
-    "TOLERANCE_CHECKS", "PrecisionWarning", "default_tolerances", "guard", "input_checks",
-    "message", "normalised", "precision_problem", "prepare", "screen", "validate",
-    "warn_precision",
-    # stepping
-    "DEFAULT_SOLVER", "ProjectedSolver", "controller", "projected", "run", "solver_options",
-    # outcome
-    "classify", "finish", "finish_sampled", "raise_on_failure",
-]  # fmt: skip
+# The package's names: each listed once, in the ``__all__`` of the module defining it.
+__all__: list[str] = []
+__all__ += inputs.__all__
+__all__ += outcome.__all__
+__all__ += stepping.__all__

@@ -15,7 +15,11 @@ The tableaus are diffrax's own (``diffrax.Tsit5.tableau``, ``diffrax.Dopri8.tabl
 so each fused solver takes the same steps as its diffrax counterpart up to rounding.
 """
 
-from jrigid.solvers.fused import FusedRungeKutta, PolynomialInterpolation
-from jrigid.solvers.pairs import FusedDopri8, FusedTsit5
+from jrigid.solvers import fused, pairs  # noqa: I001
+from jrigid.solvers.fused import *  # noqa: F403
+from jrigid.solvers.pairs import *  # noqa: F403
 
-__all__ = ["FusedDopri8", "FusedRungeKutta", "FusedTsit5", "PolynomialInterpolation"]
+# The package's names: each listed once, in the ``__all__`` of the module defining it.
+__all__: list[str] = []
+__all__ += fused.__all__
+__all__ += pairs.__all__

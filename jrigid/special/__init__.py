@@ -24,28 +24,13 @@ few times the change caused by rounding the argument itself (``eps |u f'(u)|``);
 raising, so that the functions can run under ``jit``.
 """
 
-from ._carlson import elliprc, elliprd, elliprf, elliprf_sqrt, elliprj, elliprj_sqrt
-from ._jacobi import am, cn, complete_k, dn, ellipj, jacobi_with_index, sn
-from ._legendre import ellipe, ellipeinc, ellipk, ellipkinc, ellippi, ellippiinc
+from jrigid.special import _carlson, _jacobi, _legendre  # noqa: I001
+from jrigid.special._carlson import *  # noqa: F403
+from jrigid.special._jacobi import *  # noqa: F403
+from jrigid.special._legendre import *  # noqa: F403
 
-__all__ = [
-    "am",
-    "cn",
-    "complete_k",
-    "dn",
-    "ellipe",
-    "ellipeinc",
-    "ellipj",
-    "ellipk",
-    "ellipkinc",
-    "ellippi",
-    "ellippiinc",
-    "elliprc",
-    "elliprd",
-    "elliprf",
-    "elliprf_sqrt",
-    "elliprj",
-    "elliprj_sqrt",
-    "jacobi_with_index",
-    "sn",
-]
+# The package's names: each listed once, in the ``__all__`` of the module defining it.
+__all__: list[str] = []
+__all__ += _carlson.__all__
+__all__ += _jacobi.__all__
+__all__ += _legendre.__all__

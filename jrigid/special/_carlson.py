@@ -22,6 +22,8 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
+__all__ = ["elliprc", "elliprd", "elliprf", "elliprf_sqrt", "elliprj", "elliprj_sqrt"]
+
 _STEPS_RF = 14
 _STEPS_RD = 14
 _STEPS_RJ = 18

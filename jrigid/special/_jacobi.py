@@ -29,6 +29,8 @@ from jax import lax
 from ._carlson import _rd_sqrt, _rf_sqrt, _safe_sqrt
 from ._legendre import _params, _times_j
 
+__all__ = ["am", "cn", "complete_k", "dn", "ellipj", "jacobi_with_index", "sn"]
+
 _U_SMALL = 0.025
 _MAX_HALVINGS = 16  # K/2 < 0.025 * 2**16 for every representable m1 > 0.
 

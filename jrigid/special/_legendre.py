@@ -21,6 +21,8 @@ import jax.numpy as jnp
 
 from ._carlson import _as_float, _rd_sqrt, _rf_sqrt, _rj_sqrt, _safe_sqrt
 
+__all__ = ["ellipe", "ellipeinc", "ellipk", "ellipkinc", "ellippi", "ellippiinc"]
+
 
 def _params(m, m1, *others):
     """Resolve ``(m, m1)`` from whichever was given; broadcast with ``others``."""

@@ -40,45 +40,13 @@ No matplotlib here (``jrigid.viz`` draws these angles; :func:`jrigid.viz.euler_a
 
 from __future__ import annotations
 
-from ._free import (
-    FreeRates,
-    body_precession_rate,
-    flip_interval,
-    flip_interval_asymptotic,
-    flip_theory,
-    free_rates,
-    plate_theory,
-    rates_from_constants,
-)
-from ._measure import (
-    angle_rate,
-    axis_angles,
-    frame_about,
-    omega_phase_rate,
-    trajectory_rates,
-    unwrap,
-    wobble_to_spin,
-    zero_crossings,
-)
-from ._top import fast_top_nutation, gyroscope_rates
+from jrigid.theory import _free, _measure, _top  # noqa: I001
+from jrigid.theory._free import *  # noqa: F403
+from jrigid.theory._measure import *  # noqa: F403
+from jrigid.theory._top import *  # noqa: F403
 
-__all__ = [
-    "FreeRates",
-    "angle_rate",
-    "axis_angles",
-    "body_precession_rate",
-    "fast_top_nutation",
-    "flip_interval",
-    "flip_interval_asymptotic",
-    "flip_theory",
-    "frame_about",
-    "free_rates",
-    "gyroscope_rates",
-    "omega_phase_rate",
-    "plate_theory",
-    "rates_from_constants",
-    "trajectory_rates",
-    "unwrap",
-    "wobble_to_spin",
-    "zero_crossings",
-]
+# The package's names: each listed once, in the ``__all__`` of the module defining it.
+__all__: list[str] = []
+__all__ += _free.__all__
+__all__ += _measure.__all__
+__all__ += _top.__all__

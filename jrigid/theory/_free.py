@@ -13,6 +13,17 @@ from jax.typing import ArrayLike
 
 from jrigid import exact, special
 
+__all__ = [
+    "FreeRates",
+    "body_precession_rate",
+    "flip_interval",
+    "flip_interval_asymptotic",
+    "flip_theory",
+    "free_rates",
+    "plate_theory",
+    "rates_from_constants",
+]
+
 _TWO_PI = 2.0 * math.pi
 
 

@@ -15,6 +15,17 @@ from jrigid import quaternion as quat
 
 from ._free import _float
 
+__all__ = [
+    "angle_rate",
+    "axis_angles",
+    "frame_about",
+    "omega_phase_rate",
+    "trajectory_rates",
+    "unwrap",
+    "wobble_to_spin",
+    "zero_crossings",
+]
+
 _TWO_PI = 2.0 * math.pi
 
 

@@ -9,6 +9,8 @@ from jax.typing import ArrayLike
 
 from ._free import _float
 
+__all__ = ["fast_top_nutation", "gyroscope_rates"]
+
 
 def gyroscope_rates(
     i1: ArrayLike, i3: ArrayLike, mgl: ArrayLike, theta: ArrayLike, omega3: ArrayLike

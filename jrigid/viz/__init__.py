@@ -25,52 +25,24 @@ Example::
     viz.animate(traj, viz.disk(1.0, 0.1), "plate.gif")
 """
 
-from . import angles, animation, data, plots, render, shapes, views
-from ._figure import MIN_WIDTH_PX, new_figure, save
-from .angles import euler_about, fit_rate
-from .animation import (
-    AliasingWarning,
-    animate,
-    ffmpeg_available,
-    frame_times,
-    write_animation,
-)
-from .data import Series, as_series, resample
-from .plots import *  # noqa: F403 - every name of plots.__all__, added below
-from .render import Camera
-from .shapes import Mesh, box, cylinder, disk, ellipsoid, rod, t_handle
-from .views import *  # noqa: F403 - every name of views.__all__, added below
+from jrigid.viz import _figure, angles, animation, data, plots, render, shapes, views  # noqa: I001
+from jrigid.viz._figure import *  # noqa: F403
+from jrigid.viz.angles import *  # noqa: F403
+from jrigid.viz.animation import *  # noqa: F403
+from jrigid.viz.data import *  # noqa: F403
+from jrigid.viz.plots import *  # noqa: F403
+from jrigid.viz.render import *  # noqa: F403
+from jrigid.viz.shapes import *  # noqa: F403
+from jrigid.viz.views import *  # noqa: F403
 
-__all__ = [
-    "AliasingWarning",
-    "Camera",
-    "MIN_WIDTH_PX",
-    "Mesh",
-    "Series",
-    "angles",
-    "animate",
-    "animation",
-    "as_series",
-    "box",
-    "cylinder",
-    "data",
-    "disk",
-    "ellipsoid",
-    "euler_about",
-    "ffmpeg_available",
-    "fit_rate",
-    "frame_times",
-    "new_figure",
-    "plots",
-    "render",
-    "resample",
-    "rod",
-    "save",
-    "shapes",
-    "t_handle",
-    "views",
-    "write_animation",
-]
-# Modules re-exported whole: their own ``__all__``.
+# The package's names: each listed once, in the ``__all__`` of the module defining it.
+__all__: list[str] = []
+__all__ += _figure.__all__
+__all__ += angles.__all__
+__all__ += animation.__all__
+__all__ += data.__all__
 __all__ += plots.__all__
+__all__ += render.__all__
+__all__ += shapes.__all__
 __all__ += views.__all__
+__all__ += ["angles", "animation", "data", "plots", "render", "shapes", "views"]
