@@ -11,11 +11,14 @@ Layers (imports point down the stack):
   :mod:`jrigid.leapfrog` (the chapter's stepper), :mod:`jrigid.exact` (closed-form
   torque-free motion) on :mod:`jrigid.special` (elliptic functions),
   :class:`Splitting` (exact-flow splitting under a torque, :mod:`jrigid.splitting`)
-- applications: :mod:`jrigid.fit`, :mod:`jrigid.ensemble`
+- the chapter's theory: :mod:`jrigid.theory` (closed-form results and rate measurements),
+  :mod:`jrigid.polhode`, :mod:`jrigid.ftle`
+- applications: :mod:`jrigid.stability`, :mod:`jrigid.fit`, :mod:`jrigid.ensemble`
 - presentation: :mod:`jrigid.viz` (matplotlib), the ``jrigid`` command line
 
-Names and submodules load on first use, so ``import jrigid`` imports neither JAX nor
-matplotlib until something needs them (``jrigid list`` stays instant).
+``ARCHITECTURE.md`` describes the layout. Names and submodules load on first use, so
+``import jrigid`` imports neither JAX nor matplotlib until something needs them
+(``jrigid list`` stays instant).
 """
 
 from __future__ import annotations
@@ -75,6 +78,7 @@ def __dir__() -> list[str]:
 if TYPE_CHECKING:
     from jrigid import (  # noqa: F401
         affine,
+        batching,
         body,
         camera,
         cli,
@@ -86,6 +90,7 @@ if TYPE_CHECKING:
         experiment_parameters,
         fit,
         formulations,
+        ftle,
         impacts,
         inertia,
         initial,
@@ -94,6 +99,7 @@ if TYPE_CHECKING:
         lagrange_top,
         leapfrog,
         linalg,
+        polhode,
         quaternion,
         registry,
         report,
@@ -104,6 +110,7 @@ if TYPE_CHECKING:
         splitting,
         stability,
         state,
+        theory,
         trajectory,
         viz,
     )
