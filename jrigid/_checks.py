@@ -33,6 +33,16 @@ def as_float(x: ArrayLike, *, weak: bool = False) -> jax.Array:
     return jnp.asarray(x, dtype=jax.dtypes.canonicalize_dtype(dtype))
 
 
+def as_floats(*xs: ArrayLike, broadcast: bool = False) -> list[jax.Array]:
+    """The arguments as arrays of one floating dtype (ints become the default float;
+    Python scalars stay weak, so float32 arrays stay float32), broadcast to one shape
+    if ``broadcast``."""
+    arrays = [as_float(x, weak=True) for x in xs]
+    dtype = jnp.result_type(*arrays)
+    arrays = [a.astype(dtype) for a in arrays]
+    return jnp.broadcast_arrays(*arrays) if broadcast else arrays
+
+
 def _shape_text(trailing: tuple[int, ...]) -> str:
     return "(" + ", ".join(["...", *(str(n) for n in trailing)]) + ")"
 

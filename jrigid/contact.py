@@ -323,7 +323,8 @@ def simulate_bounces(
         >>> run = contact.simulate_bounces(scene, state, jnp.linspace(0.0, 1.0, 5))
         >>> run.status, len(run.bounces["t"]), run.trajectory.x.shape
         ('t_end', 1, (5, 3))
-        >>> round(float(run.bounces["un_after"][0] / run.bounces["un_before"][0]), 3)
+        >>> after, before = run.bounces["un_after"], run.bounces["un_before"]
+        >>> round(float(after[0] / before[0]), 3)
         -0.5
     """
     formulation = get_formulation(formulation)

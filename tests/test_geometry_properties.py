@@ -923,6 +923,74 @@ def _shapes(name, data, batch):
         inertia.validate(out, kind="moments")
 
 
+T_HANDLE_SIZES = ("bar_length", "bar_radius", "stem_length", "stem_radius")
+
+
+def _t_handle_numpy(mass, bl, br, sl, sr):
+    """The T-handle's moments from Table 17.1's cylinder and the parallel-axis shift."""
+    v_bar, v_stem = np.pi * br**2 * bl, np.pi * sr**2 * sl
+    m_bar, m_stem = mass * v_bar / (v_bar + v_stem), mass * v_stem / (v_bar + v_stem)
+    y_stem = br + sl / 2
+    y_cm = v_stem * y_stem / (v_bar + v_stem)
+    d_bar, d_stem = y_cm, y_stem - y_cm  # both offsets along y
+    across_bar = m_bar * (3 * br**2 + bl**2) / 12
+    across_stem = m_stem * (3 * sr**2 + sl**2) / 12
+    ixx = m_bar * br**2 / 2 + m_bar * d_bar**2 + across_stem + m_stem * d_stem**2
+    iyy = across_bar + m_stem * sr**2 / 2
+    izz = across_bar + m_bar * d_bar**2 + across_stem + m_stem * d_stem**2
+    return np.stack([ixx, iyy, izz], axis=-1)
+
+
+@case(inertia, "t_handle_parts", "t_handle_moments")
+def _t_handle(name, data, batch):
+    rng = _rng(data, "sizes")
+    mass = 10.0 ** rng.uniform(-50, 50, size=batch)
+    scale = 10.0 ** rng.uniform(-20, 20, size=batch)
+    sizes = {k: scale * 10.0 ** rng.uniform(-1, 1, size=batch) for k in T_HANDLE_SIZES}
+    kind = data.draw(st.sampled_from(["valid", "int", "bad"]), label="kind")
+    if kind == "int":
+        sizes = {k: rng.integers(1, 5, size=batch) for k in T_HANDLE_SIZES}
+    if kind == "bad":
+        bad = data.draw(st.sampled_from([0.0, -1.0, np.nan, np.inf]), label="bad value")
+        names = T_HANDLE_SIZES if name == "t_handle_parts" else ("mass",) + T_HANDLE_SIZES
+        which = data.draw(st.sampled_from(names), label="bad argument")
+        first = np.arange(mass.size).reshape(batch) == 0
+        if which == "mass":
+            mass = np.where(first, bad, mass)
+        else:
+            sizes[which] = np.where(first, bad, sizes[which])
+        with pytest.raises(ValueError, match=f"{which} must be finite and > 0"):
+            if name == "t_handle_parts":
+                inertia.t_handle_parts(**sizes)
+            else:
+                inertia.t_handle_moments(mass, **sizes)
+        return
+    if name == "t_handle_parts":
+        parts = inertia.t_handle_parts(**sizes)
+        frac = np.stack([np.asarray(p["mass_fraction"]) for p in parts])
+        centers = np.stack([np.asarray(p["center"]) for p in parts])
+        assert centers.shape == (2,) + batch + (3,)
+        np.testing.assert_allclose(frac.sum(0), 1.0, rtol=1e-12)
+        # the origin is the centre of mass; the stem starts on the bar's surface
+        com = (frac[..., None] * centers).sum(0)
+        assert np.all(np.abs(com) <= 1e-12 * np.abs(centers).max(0))
+        gap = centers[1, ..., 1] - centers[0, ..., 1] - np.asarray(sizes["stem_length"]) / 2
+        np.testing.assert_allclose(gap, np.asarray(sizes["bar_radius"], float), rtol=1e-12)
+        # each orientation turns the cylinder's z onto the part's axis (bar x, stem y)
+        for part, axis in zip(parts, np.eye(3)[:2], strict=True):
+            q = np.asarray(part["orientation"]).reshape(-1, 4)
+            z = Rotation.from_quat(q[:, [1, 2, 3, 0]]).apply([0.0, 0.0, 1.0])
+            np.testing.assert_allclose(z, np.broadcast_to(axis, z.shape), atol=1e-12)
+        return
+    out = np.asarray(inertia.t_handle_moments(mass, **sizes))
+    assert out.shape == batch + (3,)
+    args = [np.asarray(sizes[k], float) for k in T_HANDLE_SIZES]
+    expected = _t_handle_numpy(np.asarray(mass, float), *args)
+    np.testing.assert_allclose(out, expected, rtol=1e-10)
+    lo_mid_hi = np.sort(out, axis=-1)
+    assert np.all(lo_mid_hi[..., 0] + lo_mid_hi[..., 1] >= lo_mid_hi[..., 2] * (1 - 1e-12))
+
+
 @case(inertia, "to_tensor", "rotate_tensor", "rotate_tensor_by_matrix", "principal_axes")
 def _tensors(name, data, batch):
     rng = _rng(data, "tensor")

@@ -177,27 +177,40 @@ def t_handle_parts(
     and ``z`` makes ``x, y, z`` the principal axes. :func:`jrigid.viz.t_handle` draws it.
 
     Args:
-        bar_length, bar_radius, stem_length, stem_radius: ``()`` sizes.
+        bar_length, bar_radius, stem_length, stem_radius: ``(...)`` sizes, finite and
+            ``> 0``, broadcast together to the batch shape ``(...)``.
 
     Returns:
-        two dicts (bar, stem) with ``radius``, ``length``, ``center (3,)`` (from the
-        common centre of mass), ``orientation (4,)`` (the quaternion turning a cylinder
-        along ``z`` onto the part's axis) and ``mass_fraction``.
+        two dicts (bar, stem) with ``radius (...)``, ``length (...)``, ``center (..., 3)``
+        (from the common centre of mass), ``orientation (..., 4)`` (the quaternion turning
+        a cylinder along ``z`` onto the part's axis) and ``mass_fraction (...)``.
+
+    Raises:
+        ValueError: a size that is not finite and ``> 0``.
     """
-    v_bar = jnp.pi * as_float(bar_radius) ** 2 * bar_length
-    v_stem = jnp.pi * as_float(stem_radius) ** 2 * stem_length
+    sizes = dict(bar_length=bar_length, bar_radius=bar_radius, stem_length=stem_length,
+                 stem_radius=stem_radius)  # fmt: skip
+    bar_length, bar_radius, stem_length, stem_radius = jnp.broadcast_arrays(
+        *(_mass(v, k) for k, v in sizes.items())
+    )
+    v_bar = jnp.pi * bar_radius**2 * bar_length
+    v_stem = jnp.pi * stem_radius**2 * stem_length
     total = v_bar + v_stem
-    y_stem = bar_radius + as_float(stem_length) / 2
+    y_stem = bar_radius + stem_length / 2
     y_cm = v_stem * y_stem / total
     zero = jnp.zeros_like(y_cm)
-    z_to_x = quat.from_axis_angle(jnp.array([0.0, 1.0, 0.0]), jnp.pi / 2)
-    z_to_y = quat.from_axis_angle(jnp.array([1.0, 0.0, 0.0]), -jnp.pi / 2)
+
+    def turn(axis, angle):
+        q = quat.from_axis_angle(jnp.array(axis, dtype=y_cm.dtype), angle)
+        return jnp.broadcast_to(q, y_cm.shape + (4,))
+
     return [
-        dict(radius=bar_radius, length=bar_length, center=jnp.stack([zero, -y_cm, zero]),
-             orientation=z_to_x, mass_fraction=v_bar / total),
+        dict(radius=bar_radius, length=bar_length,
+             center=jnp.stack([zero, -y_cm, zero], axis=-1),
+             orientation=turn([0.0, 1.0, 0.0], jnp.pi / 2), mass_fraction=v_bar / total),
         dict(radius=stem_radius, length=stem_length,
-             center=jnp.stack([zero, y_stem - y_cm, zero]), orientation=z_to_y,
-             mass_fraction=v_stem / total),
+             center=jnp.stack([zero, y_stem - y_cm, zero], axis=-1),
+             orientation=turn([1.0, 0.0, 0.0], -jnp.pi / 2), mass_fraction=v_stem / total),
     ]  # fmt: skip
 
 
@@ -209,14 +222,16 @@ def t_handle_moments(mass=1.0, **dims) -> jax.Array:
     (:func:`parallel_axis`). By the body's mirror symmetries the sum is diagonal.
 
     Args:
-        mass: ``()`` total mass.
-        dims: the sizes of :func:`t_handle_parts`.
+        mass: ``(...)`` total mass, finite and ``> 0``.
+        dims: the ``(...)`` sizes of :func:`t_handle_parts` (keywords).
 
     Returns:
-        ``(3,)`` moments (the middle one, about the stem's ``y``, is the intermediate).
+        ``(..., 3)`` moments (the middle one, about the stem's ``y``, is the intermediate
+        for the default sizes).
 
     Raises:
-        ValueError: (concrete input) if the tensor is not diagonal.
+        ValueError: a mass or size that is not finite and ``> 0``; (concrete input) a
+            tensor that is not diagonal.
 
     Example:
         >>> from jrigid import inertia
@@ -224,14 +239,17 @@ def t_handle_moments(mass=1.0, **dims) -> jax.Array:
         >>> print(bool(m[0] < m[1] < m[2]))
         True
     """
-    total = jnp.zeros((3, 3))
+    mass = _mass(mass)
+    total = 0.0
     for part in t_handle_parts(**dims):
-        m = as_float(mass) * part["mass_fraction"]
+        m = jnp.multiply(*jnp.broadcast_arrays(mass, part["mass_fraction"]))
         central = to_tensor(solid_cylinder(m, part["radius"], part["length"]))
         total = total + parallel_axis(rotate_tensor(central, part["orientation"]), m,
                                       part["center"])  # fmt: skip
+    diagonal = jnp.diagonal(total, axis1=-2, axis2=-1)
     if not is_traced(total):
-        off = jnp.abs(total - jnp.diag(jnp.diag(total))).max()
-        if off > 1e-9 * jnp.abs(total).max():
-            raise ValueError(f"T-handle tensor is not diagonal (off-diagonal {float(off):.3g})")
-    return jnp.diag(total)
+        off = jnp.abs(total * jnp.broadcast_to(1 - jnp.eye(3), total.shape)).max(axis=(-2, -1))
+        ratio = float(jnp.max(off / jnp.abs(total).max(axis=(-2, -1))))
+        if ratio > 1e-9:
+            raise ValueError(f"T-handle tensor is not diagonal (off-diagonal {ratio:.3g})")
+    return diagonal

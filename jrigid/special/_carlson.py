@@ -22,6 +22,8 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
+from jrigid._checks import as_floats
+
 __all__ = ["elliprc", "elliprd", "elliprf", "elliprf_sqrt", "elliprj", "elliprj_sqrt"]
 
 _STEPS_RF = 14
@@ -29,16 +31,6 @@ _STEPS_RD = 14
 _STEPS_RJ = 18
 # Public R_J: extra steps so that p up to 1e12 times x, y, z still converges.
 _STEPS_RJ_WIDE = 30
-
-
-def _as_float(*xs):
-    arrays = [jnp.asarray(x) for x in xs]
-    arrays = [
-        a if jnp.issubdtype(a.dtype, jnp.inexact) else a.astype(jnp.result_type(float))
-        for a in arrays
-    ]
-    dtype = jnp.result_type(*arrays)
-    return jnp.broadcast_arrays(*[a.astype(dtype) for a in arrays])
 
 
 def _safe_sqrt(x):
@@ -191,7 +183,7 @@ def elliprf(x, y, z) -> jax.Array:
         ``(...)`` array; matches ``scipy.special.elliprf`` for real arguments.
         Negative arguments give NaN.
     """
-    x, y, z = _as_float(x, y, z)
+    x, y, z = as_floats(x, y, z, broadcast=True)
     bad = (x < 0) | (y < 0) | (z < 0)
     out = _rf_sqrt(_safe_sqrt(x), _safe_sqrt(y), _safe_sqrt(z))
     return jnp.where(bad, jnp.nan, out)
@@ -207,7 +199,7 @@ def elliprd(x, y, z) -> jax.Array:
     Returns:
         ``(...)`` array; matches ``scipy.special.elliprd``. Invalid arguments give NaN.
     """
-    x, y, z = _as_float(x, y, z)
+    x, y, z = as_floats(x, y, z, broadcast=True)
     bad = (x < 0) | (y < 0) | (z <= 0)
     out = _rd_sqrt(_safe_sqrt(x), _safe_sqrt(y), _safe_sqrt(jnp.where(bad, 1.0, z)))
     return jnp.where(bad, jnp.nan, out)
@@ -224,7 +216,7 @@ def elliprj(x, y, z, p) -> jax.Array:
     Returns:
         ``(...)`` array; matches ``scipy.special.elliprj`` for ``p > 0``.
     """
-    x, y, z, p = _as_float(x, y, z, p)
+    x, y, z, p = as_floats(x, y, z, p, broadcast=True)
     bad = (x < 0) | (y < 0) | (z < 0) | (p <= 0)
     sp = _safe_sqrt(jnp.where(bad, 1.0, p))
     out = _rj_sqrt(_safe_sqrt(x), _safe_sqrt(y), _safe_sqrt(z), sp, _STEPS_RJ_WIDE)
@@ -241,7 +233,7 @@ def elliprc(x, y) -> jax.Array:
     Returns:
         ``(...)`` array; matches ``scipy.special.elliprc`` for ``y > 0``.
     """
-    x, y = _as_float(x, y)
+    x, y = as_floats(x, y, broadcast=True)
     bad = (x < 0) | (y <= 0)
     ys = jnp.where(bad, 1.0, y)
     r = jnp.where(bad, 1.0, x) / ys
@@ -279,7 +271,7 @@ def elliprf_sqrt(sx, sy, sz) -> jax.Array:
         ``(...)`` array, ``R_F(sx², sy², sz²)`` (:func:`elliprf`). Differentiable in all
         arguments.
     """
-    sx, sy, sz = _as_float(sx, sy, sz)
+    sx, sy, sz = as_floats(sx, sy, sz, broadcast=True)
     return _rf_sqrt(sx, sy, sz)
 
 
@@ -308,5 +300,5 @@ def elliprj_sqrt(sx, sy, sz, sp, steps: int = _STEPS_RJ) -> jax.Array:
         ``(...)`` array, ``R_J(sx², sy², sz², sp²)`` (:func:`elliprj`). Differentiable in
         all arguments.
     """
-    sx, sy, sz, sp = _as_float(sx, sy, sz, sp)
+    sx, sy, sz, sp = as_floats(sx, sy, sz, sp, broadcast=True)
     return _rj_sqrt(sx, sy, sz, sp, steps)

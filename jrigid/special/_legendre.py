@@ -19,7 +19,9 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from ._carlson import _as_float, _rd_sqrt, _rf_sqrt, _rj_sqrt, _safe_sqrt
+from jrigid._checks import as_floats
+
+from ._carlson import _rd_sqrt, _rf_sqrt, _rj_sqrt, _safe_sqrt
 
 __all__ = ["ellipe", "ellipeinc", "ellipk", "ellipkinc", "ellippi", "ellippiinc"]
 
@@ -29,13 +31,13 @@ def _params(m, m1, *others):
     if m is None and m1 is None:
         raise ValueError("give the parameter m or its complement m1 = 1 - m")
     if m1 is None:
-        m, *others = _as_float(m, *others)
+        m, *others = as_floats(m, *others, broadcast=True)
         m1 = 1.0 - m
     elif m is None:
-        m1, *others = _as_float(m1, *others)
+        m1, *others = as_floats(m1, *others, broadcast=True)
         m = 1.0 - m1
     else:
-        m, m1, *others = _as_float(m, m1, *others)
+        m, m1, *others = as_floats(m, m1, *others, broadcast=True)
     return m, m1, others
 
 

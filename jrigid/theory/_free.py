@@ -12,6 +12,7 @@ import jax.numpy as jnp
 from jax.typing import ArrayLike
 
 from jrigid import exact, special
+from jrigid._checks import as_floats
 
 __all__ = [
     "FreeRates",
@@ -25,13 +26,6 @@ __all__ = [
 ]
 
 _TWO_PI = 2.0 * math.pi
-
-
-def _float(*xs):
-    """The arguments as arrays of one floating dtype."""
-    arrays = [jnp.asarray(x) for x in xs]
-    dtype = jnp.result_type(*arrays, float)
-    return [a.astype(dtype) for a in arrays]
 
 
 def _safe(ok, x):
@@ -57,7 +51,7 @@ def body_precession_rate(moments: ArrayLike, omega: ArrayLike) -> jax.Array:
         >>> print(f"{float(theory.body_precession_rate([1.0, 1.0, 2.0], [0.3, 0.0, 2.0])):.3f}")
         2.000
     """
-    moments, omega = _float(moments, omega)
+    moments, omega = as_floats(moments, omega)
     return (moments[..., 2] / moments[..., 0] - 1.0) * omega[..., 2]
 
 
@@ -85,7 +79,7 @@ def plate_theory(moments: ArrayLike, omega: ArrayLike) -> dict:
         >>> print(f"{float(th['ratio']):.4f} {float(th['precession_rate']):.4f}")
         2.0000 6.0000
     """
-    moments, omega = _float(moments, omega)
+    moments, omega = as_floats(moments, omega)
     i1, i3, w3 = moments[..., 0], moments[..., 2], omega[..., 2]
     lnorm = jnp.linalg.norm(moments * omega, axis=-1)
     theta = jnp.arccos(i3 * w3 / lnorm)
@@ -165,7 +159,7 @@ def free_rates(moments: ArrayLike, omega: ArrayLike) -> FreeRates:
         >>> print(f"{float(r.ratio):.4f} {float(r.ratio) * math.cos(float(r.tilt_min)):.4f}")
         2.0056 2.0000
     """
-    moments, omega = _float(moments, omega)
+    moments, omega = as_floats(moments, omega)
     q0 = jnp.array([1.0, 0.0, 0.0, 0.0], moments.dtype)
     return rates_from_constants(exact.prepare(moments, q0, omega))
 
@@ -237,7 +231,7 @@ def flip_theory(moments: ArrayLike, omega: ArrayLike) -> dict:
         >>> print(th["axis"], f"{float(th['flip_interval']):.4f}")
         1 18.8519
     """
-    moments, omega = _float(moments, omega)
+    moments, omega = as_floats(moments, omega)
     order = jnp.argsort(jax.lax.stop_gradient(moments))
     big_a, big_b, big_c = (moments[order[k]] for k in range(3))
     wa, wb, wc = (omega[order[k]] for k in range(3))

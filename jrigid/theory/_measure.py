@@ -12,8 +12,7 @@ import numpy as np
 from jax.typing import ArrayLike
 
 from jrigid import quaternion as quat
-
-from ._free import _float
+from jrigid._checks import as_floats
 
 __all__ = [
     "angle_rate",
@@ -231,7 +230,7 @@ def zero_crossings(ts: ArrayLike, x: ArrayLike) -> jax.Array:
         >>> print(jnp.round(theory.zero_crossings(ts, jnp.sin(ts)), 3))
         [3.142 6.283]
     """
-    ts, x = _float(ts, x)
+    ts, x = as_floats(ts, x)
     xs = np.asarray(jax.lax.stop_gradient(x))
     i = np.nonzero(np.sign(xs[:-1]) * np.sign(xs[1:]) < 0)[0]
     return ts[i] - x[i] * (ts[i + 1] - ts[i]) / (x[i + 1] - x[i])

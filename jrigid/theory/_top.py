@@ -7,7 +7,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jax.typing import ArrayLike
 
-from ._free import _float
+from jrigid._checks import as_floats
 
 __all__ = ["fast_top_nutation", "gyroscope_rates"]
 
@@ -42,7 +42,7 @@ def gyroscope_rates(
         >>> print(f"{float(r['slow']):.4f} {float(r['slow_approx']):.4f}")
         0.1005 0.1000
     """
-    i1, i3, mgl, theta, omega3 = _float(i1, i3, mgl, theta, omega3)
+    i1, i3, mgl, theta, omega3 = as_floats(i1, i3, mgl, theta, omega3)
     a, b = i1 * jnp.cos(theta), i3 * omega3
     disc = jnp.sqrt(b * b - 4.0 * a * mgl)
     return dict(
@@ -75,6 +75,6 @@ def fast_top_nutation(
         >>> round(float(nut["frequency"]), 1), round(float(nut["dip"]), 4)
         (10.0, 0.0168)
     """
-    i1, i3, mgl, theta, omega3 = _float(i1, i3, mgl, theta, omega3)
+    i1, i3, mgl, theta, omega3 = as_floats(i1, i3, mgl, theta, omega3)
     spin = i3 * omega3
     return dict(frequency=spin / i1, dip=2.0 * mgl * i1 * jnp.sin(theta) / spin**2)
