@@ -356,3 +356,28 @@ def test_a_new_observation_subclasses_abstract_observation():
     problem = fit.Problem(fit.Exact(build), MomentumMagnitude(ts, magnitude))
     assert problem.size == 5
     assert float(problem.loss(truth())) < 1e-20
+
+
+def test_closed_form_models_take_every_torque_free_scene_and_refuse_a_top():
+    """``Exact`` follows ``Scene.torque_free``: a body in free flight under gravity rotates
+    as the free rotor (same q, ω as ``exact.solve``); a top on a pivot is refused."""
+    from jrigid.scene import FreeFlight, Gravity, Pivot
+
+    ts = jnp.linspace(0.0, 2.0, 5)
+
+    def flying(theta):
+        scene, state = build(theta)
+        return Scene(scene.body, FreeFlight(), (Gravity(),)), state
+
+    pred = fit.Exact(flying)(truth(), ts)
+    q, omega = exact.solve(TRUE_MOMENTS, jnp.array([1.0, 0.0, 0.0, 0.0]), TRUE_OMEGA0, ts)
+    np.testing.assert_allclose(pred.omega, omega, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(pred.q, q, rtol=0, atol=1e-10)
+
+    def top(theta):
+        scene, state = build(theta)
+        return Scene(scene.body, Pivot(), (Gravity(),)), state
+
+    for model in (fit.Exact, fit.Invariants):
+        with pytest.raises(ValueError, match="torque-free scenes"):
+            model(top)(truth(), ts)

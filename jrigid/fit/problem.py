@@ -7,7 +7,7 @@ user function ``build(theta) -> (Scene, State)`` that uses the maps of
 
 - :class:`Simulated` — :func:`jrigid.simulate` (any scene: tops, torques);
 - :class:`Exact` — the closed-form torque-free solution :func:`jrigid.exact.solve`
-  (``FreeRotation`` scenes without loads only; much faster, no step control);
+  (torque-free scenes only, :attr:`Scene.torque_free`; much faster, no step control);
 - :class:`Invariants` — no trajectory, only the constants of torque-free motion, for
   problems whose observations are all closed-form features.
 
@@ -32,7 +32,7 @@ import numpy as np
 from jrigid import exact
 from jrigid.fit.observations import AbstractObservation, Prediction
 from jrigid.integrate import simulate
-from jrigid.scene import FreeRotation, Scene
+from jrigid.scene import Scene
 from jrigid.state import State
 
 __all__ = ["Exact", "Invariants", "Problem", "Simulated"]
@@ -84,8 +84,7 @@ class Simulated(eqx.Module):
         if forward_mode:
             kw["adjoint"] = diffrax.ForwardMode()
         traj = simulate(scene, state, ts, **kw)
-        free = isinstance(scene.holder, FreeRotation) and not scene.loads
-        moments = scene.body.moments if free else None
+        moments = scene.body.moments if scene.torque_free else None
         return Prediction(traj.q, traj.omega, scene.body.frame, moments)
 
 
@@ -101,7 +100,7 @@ class _TorqueFree(eqx.Module):
         """``(scene, state, constants)`` of ``build(theta)``; ``ValueError(refusal)`` for a
         scene that is not torque-free."""
         scene, state = _built(self.build, theta)
-        if not isinstance(scene.holder, FreeRotation) or scene.loads:
+        if not scene.torque_free:
             raise ValueError(refusal)
         return scene, state, exact.prepare(scene.body.moments, state.q, state.omega)
 
@@ -110,15 +109,15 @@ class Exact(_TorqueFree):
     """Forward model through the closed-form torque-free solution :func:`jrigid.exact.solve`.
 
     Args:
-        build: ``theta -> (Scene, State)`` with a :class:`~jrigid.scene.FreeRotation`
-            scene and no loads; the state is at ``ts[0]``.
+        build: ``theta -> (Scene, State)`` with a torque-free scene
+            (:attr:`~jrigid.scene.Scene.torque_free`: free rotation, or free flight under
+            gravity); the state is at ``ts[0]``.
     """
 
     def __call__(self, theta, ts, *, forward_mode: bool = False) -> Prediction:
         scene, state, consts = self._prepared(
             theta,
-            "the Exact model is for torque-free FreeRotation scenes without loads; "
-            "use Simulated",
+            "the Exact model is for torque-free scenes (Scene.torque_free); use Simulated",
         )
         q, omega = exact.evaluate(consts, ts - ts[0])
         return Prediction(q, omega, scene.body.frame, scene.body.moments, consts)
@@ -134,13 +133,13 @@ class Invariants(_TorqueFree):
     :class:`Problem` refuses it with any other observation.
 
     Args:
-        build: ``theta -> (Scene, State)``, a torque-free :class:`~jrigid.scene.FreeRotation`
-            scene without loads.
+        build: ``theta -> (Scene, State)``, a torque-free scene
+            (:attr:`~jrigid.scene.Scene.torque_free`).
     """
 
     def __call__(self, theta, ts, *, forward_mode: bool = False) -> Prediction:
         scene, state, consts = self._prepared(
-            theta, "the Invariants model is for torque-free FreeRotation scenes without loads"
+            theta, "the Invariants model is for torque-free scenes (Scene.torque_free)"
         )
         omega = jnp.broadcast_to(state.omega, ts.shape + (3,))
         return Prediction(None, omega, scene.body.frame, scene.body.moments, consts)
