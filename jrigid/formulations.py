@@ -75,7 +75,6 @@ def _translation_rates(scene: Scene, v, force):
     return v, force / scene.body.mass
 
 
-
 def _traced_once(method):
     """``method`` as an ``equinox.filter_jit`` function: traced once per input structure
     and then reused (by every stage of a Runge–Kutta step, by the projection after it, and
