@@ -171,13 +171,13 @@ def test_gradient_through_projected_solve_matches_finite_differences():
         traj = simulate(scene, initial.from_omega(Q, OMEGA), ts, rtol=1e-11, atol=1e-13)
         return traj.omega[-1, 0] + traj.q[-1, 1]
 
-    g = jax.grad(loss)(2.0)
+    g = jax.jit(jax.grad(loss))(2.0)
     h = 1e-5
     fd = (loss(2.0 + h) - loss(2.0 - h)) / (2 * h)
     np.testing.assert_allclose(g, fd, rtol=1e-6)
-    fwd = jax.jacfwd(
+    fwd = jax.jit(jax.jacfwd(
         lambda i2: simulate(Scene(RigidBody(jnp.stack([1.0, i2, 2.5]))),
                             initial.from_omega(Q, OMEGA), ts, rtol=1e-11, atol=1e-13,
                             adjoint=diffrax.ForwardMode()).omega[-1, 0]
-    )(2.0)
+    ))(2.0)
     assert np.isfinite(fwd)

@@ -236,7 +236,9 @@ def test_vmapped_gradients_match_finite_differences():
     com = jnp.array([[0.1, -0.2, 0.5], [0.0, 0.0, 0.7]])
     moments = jnp.array([[1.0, 1.5, 2.0], [1.0, 1.0, 1.5]])
     w0 = jnp.stack([ASYMMETRIC_W0, SYMMETRIC_W0])
-    values, grads = jax.vmap(jax.value_and_grad(loss, argnums=(0, 1, 2)))(com, moments, w0)
+    values, grads = jax.jit(jax.vmap(jax.value_and_grad(loss, argnums=(0, 1, 2))))(
+        com, moments, w0
+    )
     rng = np.random.default_rng(0)
     eps = 1e-5
     for k in range(2):
