@@ -350,7 +350,8 @@ def test_killed_run_resumes_without_loss(tmp_path):
     proc = _python(code)
     try:
         deadline = time.monotonic() + 60
-        while not (out_dir / "chunk_00001.npz").exists():
+        # chunks run on several threads and may finish out of order: wait for any two
+        while len(list(out_dir.glob("chunk_*.npz"))) < 2:
             assert proc.poll() is None, proc.communicate()[1]
             assert time.monotonic() < deadline, "no chunk written within 60 s"
             time.sleep(0.02)
