@@ -153,8 +153,8 @@ def test_checkpointed_reverse_mode_equals_forward_mode():
     Near the separatrix a step recomputed with other rounding can flip an accept/reject
     decision and differentiate a different path: the gradient then drifted by up to
     1e-3 from forward mode. Forward mode and reverse with a checkpoint at every step
-    differentiate the same path, so they must agree to rounding. ``jax.jacfwd`` works
-    on plain ``simulate`` (it picks ``diffrax.ForwardMode`` itself, also inside ``jit``).
+    differentiate the same path, so they must agree to rounding. ``jax.jacfwd`` of a
+    function calling ``simulate`` works under ``jit`` (``diffrax.ForwardMode`` is picked).
     """
 
     def final(moments):
