@@ -1,23 +1,33 @@
-"""The :func:`fit` driver: optax's L-BFGS (with its zoom line search), Adam, or
-Levenberg–Marquardt on a :class:`~jrigid.fit.problem.Problem`'s residuals, over one or
+"""The :func:`fit` driver: L-BFGS (optax's direction, a strong-Wolfe line search), Adam,
+or Levenberg–Marquardt on a :class:`~jrigid.fit.problem.Problem`'s residuals, over one or
 several horizons — and a verdict on the result.
 
 One step of each method is in :mod:`jrigid.fit.steps`. No local method keeps a fit
 from far away out of the optima on the edge of the physical region that the loss of a
 long record leads to; a growing record (``horizons``) does.
 
-One compiled step function per call; the loop runs in Python so that it can stop,
-record a history and drive a ``tqdm`` progress bar. Stopping rules, checked before
-every step, in this order:
+The loop runs in Python so that it can stop, record a history and drive a ``tqdm``
+progress bar; what it calls is compiled once per loss structure and reused by every
+iteration, every horizon stage and every problem that differs only in its data (the
+loss is an argument of the compiled functions: a pytree when it is a Problem's bound
+method). For L-BFGS that is the loss's ``value_and_grad``, which every trial point of the
+line search calls, and the small direction update. Stopping rules, checked before every
+step is accepted (and, for L-BFGS, before its line search is run), in this order:
 
 - ``gtol``: the largest gradient component ``‖∇f‖_∞ ≤ gtol`` → converged;
 - ``ftol``: the decrease of the last step ``|f_{k−1} − f_k| ≤ ftol · max(1, |f_k|)`` →
   converged (for Adam, whose steps do not decrease ``f`` monotonically, it must hold
   for 5 consecutive steps);
 - non-finite loss or gradient → stopped (``"nonfinite"``), not converged;
-- Levenberg–Marquardt only: no damping up to ``μ = 1e16`` gives an accepted step →
-  ``"ftol"`` if the undamped Gauss–Newton step promises less than the ``ftol`` decrease
-  (the optimum to rounding), else ``"stalled"``, not converged;
+- Levenberg–Marquardt: no damping up to ``μ = 1e16`` gives an accepted step; L-BFGS: the
+  line search finds no step with sufficient decrease, neither along the L-BFGS
+  direction nor, with the memory cleared, along steepest descent → ``"ftol"`` if the
+  model's own step (the undamped Gauss–Newton step; the quasi-Newton step, decrease
+  ``−½ ∇f·d``) promises less than ``max(ftol, eps) · max(1, |f|)`` (the optimum to
+  rounding; ``eps`` the machine epsilon of the loss's dtype) or, for L-BFGS, less than
+  the loss's noise that the failed search saw (the optimum to the accuracy of a loss
+  computed by an adaptive ODE solver; see :mod:`jrigid.fit.steps`), else ``"stalled"``,
+  not converged;
 - ``max_iter`` steps taken → stopped, not converged.
 
 Stopping is not success: :func:`fit` then judges the end point (the checks of
@@ -40,7 +50,15 @@ import numpy as np
 import optax
 
 from jrigid.fit.problem import Problem
-from jrigid.fit.steps import LMState, lbfgs_step, lm_step, make_optimizer, plain_step
+from jrigid.fit.steps import (
+    LMState,
+    lbfgs_init,
+    lbfgs_step,
+    lm_step,
+    make_optimizer,
+    negligible_decrease,
+    plain_step,
+)
 from jrigid.fit.uncertainty import Laplace, residuals_and_jacobian
 from jrigid.fit.verdict import (
     DEFAULT_CHI2_ALPHA,
@@ -196,12 +214,14 @@ def fit(
             roughly the right proportions, :func:`jrigid.inertia.box`, through
             :func:`~jrigid.fit.moment_ratios_raw`) and the initial spin from the data
             (the first gyroscope sample).
-        method: ``"lbfgs"`` (``optax.lbfgs`` with zoom line search; default), ``"adam"``,
-            or ``"lm"`` (Levenberg–Marquardt with forward-mode Jacobians; ``problem``
-            must be a :class:`~jrigid.fit.problem.Problem`).
-        learning_rate: Adam's step (default ``1e-2``); for L-BFGS ``None`` lets the line
-            search choose; for ``"lm"`` the initial damping μ relative to ``diag(JᵀJ)``
-            (default ``1e-3``).
+        method: ``"lbfgs"`` (L-BFGS: optax's ``scale_by_lbfgs`` direction, memory 10,
+            and a strong-Wolfe line search; default), ``"adam"``, or ``"lm"``
+            (Levenberg–Marquardt with forward-mode Jacobians; ``problem`` must be a
+            :class:`~jrigid.fit.problem.Problem`).
+        learning_rate: Adam's step (default ``1e-2``); for L-BFGS a factor on the
+            direction, the line search's first trial step (``None``: 1, the
+            quasi-Newton step); for ``"lm"`` the initial damping μ relative to
+            ``diag(JᵀJ)`` (default ``1e-3``).
         max_iter: largest number of optimiser steps.
         gtol: stop when ``‖∇f‖_∞ ≤ gtol``.
         ftol: stop when the relative decrease falls below ``ftol`` (see module docstring).
@@ -266,11 +286,10 @@ def fit(
         optimizer = make_optimizer(method, learning_rate) if optimizer is None else optimizer
     stages = _stages(problem, horizons) if horizons is not None else [problem]
 
-    # One compiled function per fit: it returns the value and gradient at ``p`` and the
-    # next iterate; the loop checks the stopping rules on the former before accepting
-    # the latter.
-    # ``f`` is an argument (a pytree when it is a Problem's bound method), so problems
-    # that differ only in their data (or their horizon) reuse the compiled step.
+    # A step returns the value and gradient at ``p`` and the next iterate; the loop checks
+    # the stopping rules on the former before accepting the latter. ``f`` is an argument
+    # of what the steps compile (a pytree when it is a Problem's bound method), so
+    # problems that differ only in their data (or their horizon) reuse the programs.
     step = lm_step if marquardt else lbfgs_step if linesearch else plain_step
     patience = 1 if linesearch or marquardt else 5
 
@@ -289,6 +308,9 @@ def fit(
         for stage in stages:
             if marquardt:
                 f, state = stage, LMState(mu0, 2.0, None, None)
+            elif linesearch:
+                f = _as_loss(stage)
+                state = lbfgs_init(optimizer, params, ftol)
             else:
                 f = _as_loss(stage)
                 # strip weak types, else the second step recompiles
@@ -297,8 +319,9 @@ def fit(
                 )
             params, state, reason, steps = _minimise(
                 step, f, optimizer, params, state, history, bar,
-                marquardt=marquardt, patience=patience, max_iter=max_iter, gtol=gtol,
-                ftol=ftol, record_params=record_params, first=n_iter == 0 and stage is stages[0],
+                marquardt=marquardt, linesearch=linesearch, patience=patience,
+                max_iter=max_iter, gtol=gtol, ftol=ftol, record_params=record_params,
+                first=n_iter == 0 and stage is stages[0],
             )  # fmt: skip
             n_iter += steps
     finally:
@@ -315,7 +338,8 @@ def fit(
         history=history,
     )
     _judge(result, problem if is_problem else None, state if marquardt else None,
-           max_iter=max_iter, chi2_alpha=chi2_alpha, edge_tol=edge_tol, rcond=rcond)  # fmt: skip
+           max_iter=max_iter, chi2_alpha=chi2_alpha, edge_tol=edge_tol, rcond=rcond,
+           method="lm" if marquardt else "lbfgs" if linesearch else method)  # fmt: skip
     if not result.success:
         if on_bad_fit == "raise":
             raise FitError(result.message, result)
@@ -340,39 +364,58 @@ def _stages(problem, horizons) -> list:
     return [*stages, problem]
 
 
-def _minimise(step, f, optimizer, params, state, history, bar, *, marquardt, patience,
-              max_iter, gtol, ftol, record_params, first):  # fmt: skip
+def _minimise(step, f, optimizer, params, state, history, bar, *, marquardt, linesearch,
+              patience, max_iter, gtol, ftol, record_params, first):  # fmt: skip
     """The optimiser loop of one stage: ``(params, state, reason, steps)``."""
     small = 0
     reason = "max_iter"
     n_iter = 0
+
+    def rule(value_f, gnorm, small):
+        """The stopping rule met at a point (``None`` if none) and the ftol streak."""
+        if not (np.isfinite(value_f) and np.isfinite(gnorm)):
+            return "nonfinite", small
+        if gnorm <= gtol:
+            return "gtol", small
+        if n_iter > 0:
+            prev = history["loss"][-1]
+            small = small + 1 if abs(prev - value_f) <= ftol * max(1.0, abs(value_f)) else 0
+            if small >= patience:
+                return "ftol", small
+        return None, small
+
     while True:
-        new_params, new_state, value, grad = step(f, optimizer, params, state)
+        if linesearch:
+            # the line search is not run from a point where the loop stops anyway
+            def settled(value, grad, n_iter=n_iter, small=small):
+                met, _ = rule(float(value), float(_inf_norm(grad)), small)
+                return met is not None or n_iter >= max_iter
+
+            new_params, new_state, value, grad = step(f, optimizer, params, state, settled)
+        else:
+            new_params, new_state, value, grad = step(f, optimizer, params, state)
         value_f = float(value)
         gnorm = float(_inf_norm(grad))
         if first and n_iter == 0 and not np.isfinite(value_f):
             raise ValueError(f"the loss at params0 is not finite ({value_f})")
+        met, small = rule(value_f, gnorm, small)
         history["loss"].append(value_f)
         history["grad_norm"].append(gnorm)
         if record_params:
             history["params"].append(jax.device_get(params))
         if bar is not None:
             bar.set_postfix(loss=f"{value_f:.4g}", grad=f"{gnorm:.2g}")
-        if not (np.isfinite(value_f) and np.isfinite(gnorm)):
-            reason = "nonfinite"
+        if met is not None:
+            reason = met
             break
-        if gnorm <= gtol:
-            reason = "gtol"
-            break
-        if n_iter > 0:
-            prev = history["loss"][-2]
-            small = small + 1 if abs(prev - value_f) <= ftol * max(1.0, abs(value_f)) else 0
-            if small >= patience:
-                reason = "ftol"
-                break
-        if marquardt and new_state.stalled:
+        if (marquardt or linesearch) and new_state.stalled:
             state = new_state
-            small_step = new_state.gn_decrease <= ftol * max(1.0, abs(value_f))
+            if marquardt:
+                small_step = negligible_decrease(new_state.gn_decrease, value, ftol)
+            else:
+                small_step = negligible_decrease(
+                    new_state.model_decrease, value, ftol, new_state.noise
+                )
             reason = "ftol" if small_step else "stalled"
             break
         if n_iter >= max_iter:
@@ -384,7 +427,8 @@ def _minimise(step, f, optimizer, params, state, history, bar, *, marquardt, pat
     return params, state, reason, n_iter
 
 
-def _judge(result: FitResult, problem, lm_state, *, max_iter, chi2_alpha, edge_tol, rcond):
+def _judge(result: FitResult, problem, lm_state, *, max_iter, chi2_alpha, edge_tol, rcond,
+           method):  # fmt: skip
     """Fill the verdict and the statistics of ``result`` in place."""
     params = result.params
     finite = all(bool(jnp.all(jnp.isfinite(x))) for x in jax.tree_util.tree_leaves(params))
@@ -430,6 +474,7 @@ def _judge(result: FitResult, problem, lm_state, *, max_iter, chi2_alpha, edge_t
         moments=None if moments is None else np.asarray(moments),
         chi2_alpha=chi2_alpha,
         edge_tol=edge_tol,
+        method=method,
     )
     result.success = bool(verdict.success and result.converged)
     result.causes = verdict.causes

@@ -59,8 +59,8 @@ class Simulated(eqx.Module):
             ``max_steps``, ``adjoint``...). ``rtol``/``atol`` default to ``1e-10``/``1e-12``
             in float64 so that finite-difference checks of gradients are meaningful.
             ``throw`` defaults to ``False``: a failed integration (e.g. at a wild trial
-            point of a line search) yields ``NaN`` residuals, which optax's line search
-            rejects, instead of aborting the fit.
+            point of a line search) yields ``NaN`` residuals, which the line search
+            rejects (it backs off), instead of aborting the fit.
 
     Calling ``model(theta, ts, forward_mode=True)`` swaps the adjoint for
     ``diffrax.ForwardMode()`` (needed by ``jax.jacfwd``, used by :func:`jrigid.fit.laplace`).

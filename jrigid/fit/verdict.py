@@ -9,8 +9,12 @@ on what can be known there, and names every cause of failure:
 ``"max_iter"``
     the optimiser hit its iteration limit before ``gtol`` or ``ftol`` was met.
 ``"stalled"``
-    Levenberg–Marquardt found no damped step that decreases the loss although the
-    Gauss–Newton model promises a decrease (an inaccurate Jacobian).
+    the optimiser found no step that decreases the loss although its model of the loss
+    promises a decrease larger than ``ftol``: Levenberg–Marquardt no damped step (an
+    inaccurate Jacobian); L-BFGS no step with sufficient decrease along its direction
+    nor, after a restart, along the negative gradient (a gradient that does not match
+    the loss, a loss noisier than the promised decrease, or a loss that is not finite
+    around the point).
 ``"not_stationary"``
     the Gauss–Newton step from the final parameters is longer than
     :data:`STEP_TOL` standard errors, ``‖U_kᵀ r‖ > STEP_TOL`` (``U_k`` the determined
@@ -146,6 +150,7 @@ def assess(
     moments=None,
     chi2_alpha: float = DEFAULT_CHI2_ALPHA,
     edge_tol: float = DEFAULT_EDGE_TOL,
+    method: str = "lm",
 ) -> Verdict:
     """Judge the end point of a fit (the checks of this module's docstring).
 
@@ -161,6 +166,7 @@ def assess(
         moments: ``(3,)`` principal moments of the fitted body, or ``None``.
         chi2_alpha: tail probability below which the χ² test fails (``0`` disables).
         edge_tol: smallest triangle gap allowed (``0`` disables).
+        method: the optimiser, ``"lm"`` or ``"lbfgs"``: words of a ``"stalled"`` cause.
 
     Returns:
         :class:`Verdict`.
@@ -173,6 +179,14 @@ def assess(
         causes["max_iter"] = (
             f"the optimiser hit its iteration limit (max_iter={max_iter}) before gtol or "
             "ftol was met"
+        )
+    elif reason == "stalled" and method == "lbfgs":
+        causes["stalled"] = (
+            "the line search found no step that decreases the loss enough, neither along "
+            "the L-BFGS direction nor along the negative gradient, although the "
+            "quasi-Newton model promised a decrease: the gradient does not match the loss, "
+            "the loss is noisier than that decrease (a loose solver tolerance), or it is "
+            "not finite around this point"
         )
     elif reason == "stalled":
         causes["stalled"] = (
