@@ -214,6 +214,109 @@ def test_driver_methods_and_stopping(method):
     assert not short.success and short.causes == ("max_iter",)
 
 
+def _rosenbrock(p):
+    x = p["x"]
+    return jnp.sum(100.0 * (x[1:] - x[:-1] ** 2) ** 2 + (1.0 - x[:-1]) ** 2)
+
+
+def _ill_conditioned_quadratic():
+    """``½ (x − x*)ᵀ A (x − x*)`` in 6 dimensions, eigenvalues 1 … 1e4, rotated."""
+    q, _ = np.linalg.qr(np.random.default_rng(7).standard_normal((6, 6)))
+    a = jnp.asarray(q @ np.diag(np.logspace(0, 4, 6)) @ q.T)
+    optimum = jnp.asarray(np.linspace(-1.0, 2.0, 6))
+    return (lambda p: 0.5 * (p["x"] - optimum) @ a @ (p["x"] - optimum)), optimum
+
+
+@pytest.mark.parametrize(
+    "case", ["rosenbrock 2", "rosenbrock 4", "separable quadratic", "rotated quadratic"]
+)
+def test_lbfgs_finds_analytic_optima_to_tight_gtol(case):
+    """Stopped by the gradient alone (``ftol=0``): the known optimum, to rounding."""
+    if case.startswith("rosenbrock"):
+        n = int(case.split()[1])
+        loss, x0, optimum = _rosenbrock, jnp.array([-1.2, 1.0, -0.5, 0.3][:n]), jnp.ones(n)
+    elif case == "separable quadratic":
+        loss, x0, optimum = _quadratic, jnp.zeros(3), jnp.arange(3.0)
+    else:
+        (loss, optimum), x0 = _ill_conditioned_quadratic(), jnp.zeros(6)
+    res = fit.fit(loss, {"x": x0}, gtol=1e-10, ftol=0.0, max_iter=500)
+    assert res.success and res.reason == "gtol" and res.grad_norm <= 1e-10, res.message
+    np.testing.assert_allclose(res.params["x"], optimum, rtol=0, atol=1e-9)
+    assert res.n_iter >= (20 if case.startswith("rosenbrock") else 2)
+    assert np.all(np.diff(res.history["loss"]) <= 0)  # every line search decreased the loss
+
+
+def test_lbfgs_compiles_the_loss_gradient_once():
+    """The line search calls one compiled ``value_and_grad`` of the loss at every trial
+    point: the loss is traced once over a whole fit of many iterations, and not again for
+    another start, for the horizon stages of a problem, or for another problem that
+    differs only in its data."""
+    traces = []
+
+    def counted(p):
+        traces.append(1)
+        return _rosenbrock(p)
+
+    res = fit.fit(counted, {"x": jnp.array([-1.2, 1.0, -0.5, 0.3])}, gtol=1e-10, ftol=0.0)
+    assert res.n_iter > 30 and len(traces) == 1
+    fit.fit(counted, {"x": jnp.array([0.5, -0.3, 0.2, 0.1])}, gtol=1e-10)
+    assert len(traces) == 1
+
+    loss_traces = []  # traces of the model in reverse mode, i.e. of the loss's gradient
+
+    def wave(theta, t, forward_mode=False):
+        if not forward_mode:
+            loss_traces.append(1)
+        om = theta["a"] * jnp.stack([jnp.cos(theta["f"] * t), jnp.sin(theta["f"] * t), 0 * t], -1)
+        return fit.Prediction(None, om, jnp.array([1.0, 0.0, 0.0, 0.0]))
+
+    ts = np.linspace(0.0, 10.0, 101)
+    start = {"f": jnp.asarray(1.9), "a": jnp.asarray(0.8)}
+    for seed in (0, 1):
+        om = np.stack([np.cos(2.0 * ts), np.sin(2.0 * ts), 0 * ts], axis=-1)
+        data = om + 0.05 * np.random.default_rng(seed).standard_normal(om.shape)
+        problem = fit.Problem(wave, fit.Gyroscope(ts, data, sigma=0.05))
+        res = fit.fit(problem, start, horizons=(0.25, 0.5))
+        assert res.success and res.n_iter > 5 and abs(float(res.params["f"]) - 2.0) < 0.01
+    assert len(loss_traces) == 1
+
+
+def _white_noise(x, level):
+    """A deterministic noise of size ``level`` that changes with every bit of ``x``."""
+    bits = jax.lax.bitcast_convert_type(x, jnp.uint64)
+    h = jnp.sum((bits * jnp.uint64(0x9E3779B97F4A7C15)) >> jnp.uint64(40))
+    return level * (h % jnp.uint64(1000)).astype(jnp.float64) / 1000.0
+
+
+def test_lbfgs_ends_by_ftol_where_the_loss_is_only_known_to_its_noise():
+    """A loss known only to 1e-9 (as one computed by an adaptive ODE solver, which jumps
+    where the solver's steps change), its gradient exact: near the minimum no step
+    decreases it by more than its noise, and the line search that fails there sees it —
+    the fit ends by ``ftol``, converged. (A gradient that does not match the loss stalls:
+    ``tests/test_fit_verdicts.py``.)"""
+
+    def noisy(p):
+        return _rosenbrock(p) + jax.lax.stop_gradient(_white_noise(p["x"], 1e-9))
+
+    res = fit.fit(noisy, {"x": jnp.array([-1.2, 1.0])}, gtol=1e-12, max_iter=500)
+    assert res.success and res.reason == "ftol", res.message
+    np.testing.assert_allclose(res.params["x"], [1.0, 1.0], rtol=0, atol=1e-6)
+
+
+def test_lbfgs_line_search_backs_off_where_the_loss_is_not_finite():
+    """A loss that is NaN beyond ``x = 2`` (as a failed integration makes it): the trial
+    points there are rejected, and the fit converges to the optimum at 1.9."""
+
+    def loss(p):
+        x = p["x"]
+        return jnp.sum((x - 1.9) ** 2) + jnp.where(jnp.all(x < 2.0), 0.0, jnp.nan)
+
+    res = fit.fit(loss, {"x": jnp.array([-8.0, 0.0])}, learning_rate=5.0, gtol=1e-10)
+    assert res.success and res.reason in ("gtol", "ftol"), res.message
+    np.testing.assert_allclose(res.params["x"], [1.9, 1.9], atol=1e-6)
+    assert np.all(np.isfinite(res.history["loss"]))
+
+
 def test_driver_progress_bar(capsys):
     res = fit.fit(_quadratic, {"x": jnp.zeros(3)}, max_iter=100, progress=True)
     assert res.converged

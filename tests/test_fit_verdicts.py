@@ -326,6 +326,12 @@ def test_iteration_limit_and_stalled_steps_are_failures():
     with pytest.warns(fit.FitWarning, match="no damped Gauss–Newton step"):
         stuck = fit.fit(fit.Problem(model, obs), {"x": jnp.zeros(3)}, method="lm")
     assert stuck.reason == "stalled" and not stuck.converged and "stalled" in stuck.causes
+    # L-BFGS: no trial point along its direction, nor along the (wrong) negative gradient
+    # after a restart, decreases the loss: stalled, not converged
+    with pytest.warns(fit.FitWarning, match="the line search found no step") as rec:
+        lost = fit.fit(fit.Problem(model, obs), {"x": jnp.zeros(3)})
+    assert lost.reason == "stalled" and not lost.converged and lost.causes[0] == "stalled"
+    assert lost.n_iter == 0 and str(rec[0].message).startswith("fit failed: the line search")
 
 
 def far_starts(data, n=10):
