@@ -27,7 +27,7 @@ Two measurements:
 Usage: ``python benchmarks/fit_lbfgs.py [--only first|far] [--methods lbfgs lm]
 [--quick] [--out DIR]``. ``--quick``: 5 starts of each kind. Writes
 ``benchmarks/results/fit_lbfgs[_quick].json`` and ``.md`` and prints the tables, headed
-by the machine. About 3 min for ``first`` and 2 min for ``far`` (L-BFGS) on 2 cores.
+by the machine. About 4 min for ``first`` and 2 min for ``far`` (L-BFGS) on 2 cores.
 """
 
 from __future__ import annotations
