@@ -12,8 +12,7 @@ Three problems, each integrated over 100 time units:
   released at tilt θ0 = 0.6 with spin ψ̇ = 5, precession φ̇ = 0.2, nutation θ̇ = 0.1.
 
 Methods: **jrigid's default** (``simulate`` with no options: quaternion acceleration,
-:func:`jrigid.solve.default_solver` — ``FusedDopri8`` at ``rtol ≤ 1e-9``, ``FusedTsit5``
-above —, projection onto the constraints and the
+:data:`jrigid.integrate.DEFAULT_SOLVER`, projection onto the constraints and the
 invariants); jrigid 0.1's default (the same form with diffrax's ``Tsit5`` and ``|q|``
 projection only) for comparison; in full mode other formulations and solvers; a
 **hand-written** ``diffrax.diffeqsolve`` on the flat ``(q, ω)`` equations with ``Tsit5``
@@ -70,8 +69,7 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import harness  # noqa: E402
 from harness import Problem  # noqa: E402
 
-from jrigid.integrate import simulate  # noqa: E402
-from jrigid.solve import default_solver  # noqa: E402
+from jrigid.integrate import DEFAULT_SOLVER, simulate  # noqa: E402
 from jrigid.solvers import FusedDopri8, FusedTsit5  # noqa: E402
 
 TARGETS = (1e-4, 1e-6, 1e-8, 1e-10)
@@ -116,49 +114,32 @@ HEAVY_TOP = Problem(
 # --------------------------------------------------------------------------- methods
 
 
-def jrigid_method(problem: Problem, max_steps: int = 100_000, tolerances=(), **options):
+def jrigid_method(problem: Problem, max_steps: int = 100_000, **options):
     """Compile ``simulate`` with ``options`` (none: the default); ``(run, compile_seconds)``.
 
     ``run(rtol, atol)`` calls the compiled solve (tolerances are traced arguments, so no
     recompilation) and returns the final ``q``, ω, step counts and a success flag.
-    Without a ``solver`` option the solver is the one ``simulate`` picks at each
-    concrete ``rtol`` (:func:`jrigid.solve.default_solver`): one program per solver met
-    over ``tolerances``; the compile time is that of the program at the default
-    ``rtol``.
     """
     scene, state = problem.scene(), problem.state()
     dtype = scene.body.moments.dtype
     ts = jnp.array([0.0, problem.t1], dtype=dtype)
 
-    def program(solver):
-        def solve(scene, state, ts, rtol, atol):
-            traj = simulate(scene, state, ts, rtol=rtol, atol=atol, max_steps=max_steps,
-                            throw=False, solver=solver, **options)
-            q = traj.q[-1] if traj.q is not None else jnp.full(4, jnp.nan, dtype)
-            return {
-                "q": q,
-                "omega": traj.omega[-1],
-                "steps": traj.stats["num_steps"],
-                "accepted": traj.stats["num_accepted_steps"],
-                "ok": traj.result == 0,
-            }
+    def solve(scene, state, ts, rtol, atol):
+        traj = simulate(scene, state, ts, rtol=rtol, atol=atol, max_steps=max_steps,
+                        throw=False, **options)
+        q = traj.q[-1] if traj.q is not None else jnp.full(4, jnp.nan, dtype)
+        return {
+            "q": q,
+            "omega": traj.omega[-1],
+            "steps": traj.stats["num_steps"],
+            "accepted": traj.stats["num_accepted_steps"],
+            "ok": traj.result == 0,
+        }
 
-        tol = jnp.asarray(1e-6, dtype)
-        return harness.compile_jax(jax.jit(solve), scene, state, ts, tol, tol)
-
-    if "solver" in options:
-        solver = options.pop("solver")
-        compiled, seconds = program(solver)
-        choose = lambda rtol: compiled  # noqa: E731
-    else:
-        kinds = {type(default_solver(r, dtype)) for r, _ in tolerances}
-        kinds.add(type(default_solver(None, dtype)))
-        programs = {kind: program(kind()) for kind in kinds}
-        seconds = programs[type(default_solver(None, dtype))][1]
-        choose = lambda rtol: programs[type(default_solver(rtol, dtype))][0]  # noqa: E731
+    tol = jnp.asarray(1e-6, dtype)
+    compiled, seconds = harness.compile_jax(jax.jit(solve), scene, state, ts, tol, tol)
 
     def run(rtol, atol):
-        compiled = choose(rtol)
         return compiled(scene, state, ts, jnp.asarray(rtol, dtype), jnp.asarray(atol, dtype))
 
     return run, seconds
@@ -325,7 +306,7 @@ def run_problem(problem: Problem, tolerances, *, quick: bool, log) -> dict:
     for label, kind, spec in method_list(problem, quick=quick):
         if kind in ("jrigid", "hand"):
             if kind == "jrigid":
-                run, compile_s = jrigid_method(problem, tolerances=tolerances, **spec)
+                run, compile_s = jrigid_method(problem, **spec)
             else:
                 run, compile_s = hand_written_method(problem, spec)
             repeats = JAX_REPEATS if not quick else 5
@@ -466,11 +447,10 @@ def diffrax_alone(problem: Problem, rtol: float):
     """
     field, y0, scene = _field_and_state(problem)
     saveat = diffrax.SaveAt(ts=jnp.array([0.0, problem.t1]), t1=True)
-    solver = default_solver(rtol, y0.q.dtype)
 
     def solve(y0, scene, rtol, atol):
         sol = diffrax.diffeqsolve(
-            diffrax.ODETerm(field.vector_field), solver, 0.0, problem.t1, None, y0,
+            diffrax.ODETerm(field.vector_field), DEFAULT_SOLVER(), 0.0, problem.t1, None, y0,
             args=scene, stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
             saveat=saveat, max_steps=100_000,
         )
@@ -524,7 +504,7 @@ def default_float32(problem: Problem, rtol: float):
     """The default method compiled in float32 (x64 off while building and compiling)."""
     jax.config.update("jax_enable_x64", False)
     try:
-        run, compile_s = jrigid_method(problem, tolerances=[(rtol, rtol * 1e-2)])
+        run, compile_s = jrigid_method(problem)
     finally:
         jax.config.update("jax_enable_x64", True)
     return (lambda: run(rtol, rtol * 1e-2)), (lambda out: int(out["accepted"])), compile_s
@@ -560,9 +540,8 @@ def extra_profile(problem: Problem, result: dict, rtol: float, log) -> dict:
     numpy right-hand-side call.
     """
     default, scipy_run = result["runs"][DEFAULT], result["runs"][PEER]
-    at = [(rtol, rtol * 1e-2)]
-    manifold, c_m = jrigid_method(problem, tolerances=at, project="manifold")
-    no_proj, c_np = jrigid_method(problem, tolerances=at, project=False)
+    manifold, c_m = jrigid_method(problem, project="manifold")
+    no_proj, c_np = jrigid_method(problem, project=False)
     builders = {
         "default": ((lambda: default(rtol, rtol * 1e-2)), _accepted, None),
         "plain": plain_call(problem, rtol),
@@ -783,7 +762,7 @@ def _why(res: dict) -> list[str]:
             f" and needs {n_d / n_p:.2g}× as many steps to reach an error of {target:.0e} "
             f"({n_d:.0f} against {n_p:.0f})"
         )
-    stages = type(default_solver(x["default"]["rtol"], np.float64)).tableau.num_stages - 1
+    stages = DEFAULT_SOLVER.tableau.num_stages - 1
     overhead = x["plain"]["time"] - x["default"]["time"]
     return [
         f"Why (medians of the interleaved profile): at rtol = {x['default']['rtol']:.0e} a "

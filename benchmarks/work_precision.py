@@ -3,8 +3,7 @@
 For each case of ``benchmarks/hard_cases.py`` (full size) this runs
 
 - **jrigid's default** (``simulate`` with tolerances only: the quaternion-acceleration
-  form, the solver of :func:`jrigid.solve.default_solver` (``FusedDopri8`` at
-  ``rtol ≤ 1e-9``, ``FusedTsit5`` above), projection onto the constraints and the
+  form, :data:`jrigid.solve.DEFAULT_SOLVER`, projection onto the constraints and the
   invariants);
 - every jrigid formulation (``quaternion_acceleration``, ``quaternion_omega``,
   ``body_omega`` where there is no torque, ``euler_angles``, each with the constraint
@@ -79,7 +78,6 @@ import harness  # noqa: E402
 from jrigid.formulations import FORMULATIONS  # noqa: E402  (every formulation, by name)
 from jrigid.integrate import simulate  # noqa: E402
 from jrigid.leapfrog import leapfrog  # noqa: E402
-from jrigid.solve import default_solver  # noqa: E402
 from jrigid.splitting import Splitting  # noqa: E402
 from jrigid.state import Kinematics  # noqa: E402
 
@@ -151,20 +149,15 @@ def _final(traj, dtype):
 
 
 def jrigid_runner(case, size, formulation, solver_name, cache: Compiled):
-    """``(run(rtol), compile_seconds)`` for ``simulate`` with one formulation and solver.
-
-    The default (``solver_name="default"``) runs the solver ``simulate`` picks at each
-    concrete ``rtol`` (:func:`jrigid.solve.default_solver`): one program per solver; the
-    compile time is that of the program at the default ``rtol``.
-    """
+    """``(run(rtol), compile_seconds)`` for ``simulate`` with one formulation and solver."""
     prob = hc.problem(case, size)
     with _x64(case):
         scene, state = prob.scene(), prob.state()
         dtype = scene.body.moments.dtype
         ts = jnp.array([0.0, prob.t1], dtype=dtype)
 
-    def build(solver):
-        options = dict(solver=solver) if solver_name == "default" else dict(
+    def build():
+        options = {} if solver_name == "default" else dict(
             formulation=formulation, solver=SOLVERS[solver_name](), project="manifold")
 
         def solve(scene, state, ts, rtol):
@@ -175,16 +168,9 @@ def jrigid_runner(case, size, formulation, solver_name, cache: Compiled):
         with _x64(case):
             return harness.compile_jax(jax.jit(solve), scene, state, ts, jnp.asarray(1e-6, dtype))
 
-    def program(rtol):
-        solver = default_solver(rtol, dtype) if solver_name == "default" else None
-        key = (_kind(case), case.dtype, formulation, solver_name, type(solver).__name__)
-        return cache.get(key, lambda: build(solver))
-
-    program(1e-3), program(1e-12)  # compile both default solvers before any timing
-    seconds = program(None)[1]
+    fn, seconds = cache.get((_kind(case), case.dtype, formulation, solver_name), build)
 
     def run(rtol):
-        fn = program(rtol)[0]
         with _x64(case):
             return fn(scene, state, ts, jnp.asarray(rtol, dtype))
 

@@ -2,8 +2,7 @@
 
 One entry point, :func:`simulate`, over :func:`diffrax.diffeqsolve`. The default is
 Euler's equations in quaternion-acceleration form (17.50) with the fused Tsitouras 5(4)
-pair (:class:`jrigid.solvers.FusedTsit5`; Dormand–Prince 8(7) at a concrete
-``rtol ≤ 1e-9``, :func:`jrigid.solve.default_solver`) under a PID controller, and after every step
+pair (:class:`jrigid.solvers.FusedTsit5`) under a PID controller, and after every step
 the state is projected back onto ``|q| = 1``, ``q·q̇ = 0`` and onto the invariants the
 scene conserves (energy and ``|L|`` for a torque-free body; energy, the vertical and —
 for a symmetric top — the axial angular momentum on a pivot under gravity): see
@@ -58,7 +57,6 @@ from jrigid.solve.outcome import classify, finish, raise_on_failure
 from jrigid.solve.stepping import (  # DEFAULT_SOLVER: also named here
     DEFAULT_SOLVER,  # noqa: F401
     controller,
-    default_solver,
     projected,
     run,
     solver_options,
@@ -246,11 +244,8 @@ def simulate(
         formulation: name (``"quaternion_acceleration"`` default, ``"quaternion_omega"``,
             ``"body_omega"``, ``"euler_angles"``) or a formulation object (e.g.
             ``QuaternionAcceleration(stabilization=1.0)``).
-        solver: any diffrax solver; default from the tolerance
-            (:func:`jrigid.solve.default_solver`): :class:`jrigid.solvers.FusedTsit5`,
-            and :class:`jrigid.solvers.FusedDopri8` (error estimate ×4) at a concrete
-            ``rtol ≤ 1e-9`` (not when ``rtol`` is traced, a ``jit`` argument: close
-            over a Python float there). Fixed-step solvers (``diffrax.Euler``,
+        solver: any diffrax solver; default :data:`jrigid.solve.DEFAULT_SOLVER`
+            (:class:`jrigid.solvers.FusedTsit5`). Fixed-step solvers (``diffrax.Euler``,
             ``diffrax.Heun``, ...) need ``stepsize_controller=diffrax.ConstantStepSize()``
             and ``dt0``. Or ``"exact"``: the closed-form motion (:mod:`jrigid.closed_form`)
             for torque-free scenes; then ``rtol``, ``atol``, ``max_steps``, ``dt0``,
@@ -345,8 +340,6 @@ def simulate(
             scene, state, ts, rtol, atol, formulation, bool(dense)
         )
         return raise_on_failure(traj, throw, ts, rtol, atol, max_steps, messages, cause)
-    if solver is None:
-        solver = default_solver(rtol, dtype)
     solver, adjoint, dt0, max_steps = solver_options(solver, adjoint, max_steps, dt0)
     if isinstance(adjoint, diffrax.RecursiveCheckpointAdjoint) and _forward_differentiated(
         (scene, initial_state, ts, rtol, atol)

@@ -1,5 +1,4 @@
-"""solve: the shared solve kit — float32 precision warnings and their threshold; the
-default solver chosen from the tolerance."""
+"""solve: the shared solve kit — float32 precision warnings and their threshold."""
 
 
 import jax
@@ -47,26 +46,3 @@ def test_precision_problem_threshold():
     assert precision_problem(state64, jnp.asarray([0.0, 1e12]), jnp.asarray(1e-10)) is None
     traced = jax.jit(lambda s: precision_problem(s, ts, rtol) is None)
     assert traced(state)
-
-
-def test_default_solver_follows_a_concrete_tolerance():
-    from jrigid.solve import DEFAULT_SOLVER, TIGHT_RTOL, TIGHT_SOLVER, default_solver
-
-    f64 = jnp.float64
-    assert isinstance(default_solver(None, f64), DEFAULT_SOLVER)  # rtol 1e-8
-    assert isinstance(default_solver(None, jnp.float32), DEFAULT_SOLVER)
-    assert default_solver(TIGHT_RTOL, f64) is TIGHT_SOLVER
-    assert default_solver(np.float64(1e-12), f64) is TIGHT_SOLVER
-    assert isinstance(default_solver(10 * TIGHT_RTOL, f64), DEFAULT_SOLVER)
-    # A traced tolerance cannot choose: the fifth-order pair.
-    chosen = []
-    jax.jit(lambda r: chosen.append(default_solver(r, f64)) or r)(1e-12)
-    assert isinstance(chosen[0], DEFAULT_SOLVER)
-    # simulate without a solver runs the chosen one: the same numbers as passing it.
-    scene = free_scene()
-    state = initial.from_omega(Q0, OMEGA0)
-    ts = jnp.linspace(0.0, 5.0, 6)
-    plain = simulate(scene, state, ts, rtol=1e-10, atol=1e-12)
-    explicit = simulate(scene, state, ts, rtol=1e-10, atol=1e-12, solver=TIGHT_SOLVER)
-    np.testing.assert_array_equal(plain.q, explicit.q)
-    assert int(plain.stats["num_steps"]) == int(explicit.stats["num_steps"])

@@ -44,7 +44,7 @@ from jrigid.invariants import Invariants
 from jrigid.scene import Scene
 from jrigid.solve.inputs import input_checks, normalised, prepare, screen
 from jrigid.solve.outcome import finish, raise_on_failure
-from jrigid.solve.stepping import controller, default_solver, projected, run, solver_options
+from jrigid.solve.stepping import controller, projected, run, solver_options
 from jrigid.state import State
 from jrigid.trajectory import Trajectory
 
@@ -207,10 +207,8 @@ def simulate_lockstep(
             "initial_states must have one leading member axis on every array (q (N, 4), "
             f"qdot (N, 4), ...), got shapes {jax.tree_util.tree_map(jnp.shape, initial_states)}"
         )
-    dtype = jnp.result_type(float)
-    if solver is None:
-        solver = default_solver(rtol, dtype)
     solver, adjoint, dt0, max_steps = solver_options(solver, adjoint, max_steps, dt0)
+    dtype = jnp.result_type(float)
     states, ts, rtol, atol = jax.vmap(
         lambda s: prepare(scene, s, ts, rtol, atol, dtype), out_axes=(0, None, None, None)
     )(initial_states)

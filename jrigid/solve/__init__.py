@@ -6,8 +6,7 @@ the splitting integrators, the closed forms and the contact solver all
 1. convert and check their inputs (:mod:`jrigid.solve.inputs`: :func:`prepare`,
    :func:`input_checks`, then :func:`validate`, :func:`guard` or :func:`screen`; in
    float32 a :class:`PrecisionWarning` when the horizon is too long for the tolerance);
-2. step with diffrax (:mod:`jrigid.solve.stepping`: :func:`default_solver` (the pair
-   chosen from the tolerance), :func:`solver_options`, the PID
+2. step with diffrax (:mod:`jrigid.solve.stepping`: :func:`solver_options`, the PID
    :func:`controller`, the solver wrapped in :class:`ProjectedSolver` for formulations
    that carry a quaternion, :func:`run`);
 3. turn the outcome into a :class:`~jrigid.trajectory.Result` code and a

@@ -18,16 +18,12 @@ import numpy as np
 from jrigid._checks import is_traced
 from jrigid.formulations import AbstractFormulation
 from jrigid.invariants import Invariants
-from jrigid.solve.inputs import default_tolerances
-from jrigid.solvers import FusedDopri8, FusedTsit5
+from jrigid.solvers import FusedTsit5
 
 __all__ = [
     "DEFAULT_SOLVER",
-    "TIGHT_RTOL",
-    "TIGHT_SOLVER",
     "ProjectedSolver",
     "controller",
-    "default_solver",
     "projected",
     "run",
     "solver_options",
@@ -37,43 +33,6 @@ __all__ = [
 #: The solver of :func:`jrigid.simulate` and the other integrators when none is given
 #: (a class, instantiated per call).
 DEFAULT_SOLVER = FusedTsit5
-
-#: The solver of :func:`jrigid.simulate` without one at a concrete ``rtol ≤``
-#: :data:`TIGHT_RTOL`: Dormand–Prince 8(7), which needs 5–9× fewer steps than the
-#: fifth-order pair there at about 3× the cost of a step, with its error estimate scaled
-#: by 4 (it steps as if the tolerances were a quarter): per tolerance the eighth-order
-#: pair is less accurate than the fifth-order one on long and near-separatrix motions
-#: (60·rtol against 9·rtol over 100 periods of a top, 4.4 against 1.0 near the
-#: separatrix, unscaled), and the scale brings it back within the default's bounds at
-#: about 1.2× the steps (measurements in the README).
-TIGHT_SOLVER = FusedDopri8(error_scale=4.0)
-
-#: Largest concrete ``rtol`` at which :data:`TIGHT_SOLVER` is the default (see
-#: :func:`default_solver`); the float64 default ``rtol = 1e-8`` is above it.
-TIGHT_RTOL = 1e-9
-
-
-def default_solver(rtol, dtype) -> diffrax.AbstractSolver:
-    """The solver of a solve given none, chosen from its tolerance.
-
-    :data:`TIGHT_SOLVER` (``FusedDopri8``) when ``rtol`` is concrete and at most
-    :data:`TIGHT_RTOL`, else :data:`DEFAULT_SOLVER` (``FusedTsit5``), also for an
-    ``rtol`` traced under ``jit`` (close over a Python float to get the choice).
-
-    Args:
-        rtol: the solve's ``rtol`` (scalar, possibly traced) or ``None`` (the default of
-            ``dtype``, :func:`jrigid.solve.inputs.default_tolerances`).
-        dtype: the solve's floating dtype.
-    """
-    if rtol is None:
-        rtol = default_tolerances(dtype)[0]
-    if is_traced(rtol) or np.ndim(rtol) != 0:
-        return _instance(DEFAULT_SOLVER)
-    try:
-        tight = float(rtol) <= TIGHT_RTOL
-    except (TypeError, ValueError):
-        return _instance(DEFAULT_SOLVER)
-    return TIGHT_SOLVER if tight else _instance(DEFAULT_SOLVER)
 
 
 class ProjectedSolver(diffrax.AbstractWrappedSolver):

@@ -6,7 +6,6 @@ from collections.abc import Callable
 from typing import ClassVar
 
 import diffrax
-import equinox as eqx
 import equinox.internal as eqxi
 import jax
 import jax.numpy as jnp
@@ -89,16 +88,11 @@ class FusedRungeKutta(diffrax.AbstractAdaptiveSolver):
     whose last stage is evaluated at the step's end, first-same-as-last),
     :attr:`interpolation_cls` (a :class:`PolynomialInterpolation` subclass over all the
     stages) and ``order``. ``terms`` must be a single ``diffrax.ODETerm``.
-
-    Attributes:
-        error_scale: factor on the embedded error estimate (default 1): the controller
-            then steps as if ``rtol`` and ``atol`` were divided by it.
     """
 
     tableau: ClassVar[diffrax.ButcherTableau]
     term_structure: ClassVar = diffrax.AbstractTerm
     interpolation_cls: ClassVar[Callable[..., PolynomialInterpolation]]
-    error_scale: float = eqx.field(static=True, default=1.0)
 
     def init(self, terms, t0, t1, y0, args):
         return ravel_pytree(terms.vf(t0, y0, args))[0]
@@ -129,7 +123,7 @@ class FusedRungeKutta(diffrax.AbstractAdaptiveSolver):
             stages.append(jax.lax.optimization_barrier(field(t_stage, y_stage)))
         # First-same-as-last: the last stage is evaluated at (t1, y1).
         flat1 = y_stage
-        error = _combination(None, h, self.error_scale * np.asarray(tab.b_error), stages)
+        error = _combination(None, h, tab.b_error, stages)
         polynomial = self.interpolation_cls.coefficients
         dense_info = dict(
             y0=y0,
