@@ -61,7 +61,15 @@ class FusedTsit5(FusedRungeKutta):
 
 
 class FusedDopri8(FusedRungeKutta):
-    """Dormand–Prince 8(7) (diffrax's ``Dopri8`` tableau) with fused stages."""
+    """Dormand–Prince 8(7) (diffrax's ``Dopri8`` tableau) with fused stages.
+
+    Its dense output (Bogacki–Shampine's interpolant, as in diffrax) is much less
+    accurate than its steps: on a free rotor at rtol 1e-9 to 1e-12 the error at output
+    times inside a step was 6–16·rtol against 0.1–0.3·rtol at step ends, and forward-mode
+    derivatives there up to 300·rtol (measured). Prefer it where output times are few
+    or at step ends (``SaveAt(t1=True)``); the default :class:`FusedTsit5` keeps
+    0.1–0.2·rtol at every output time.
+    """
 
     tableau: ClassVar[diffrax.ButcherTableau] = diffrax.Dopri8.tableau
     interpolation_cls: ClassVar = _Dopri8Dense
