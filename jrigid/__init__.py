@@ -22,7 +22,7 @@ Layers (imports point down the stack):
 
 Importing jrigid raises XLA:CPU's small-while-loop threshold in ``XLA_FLAGS`` (unless
 already set), so that a solve's loop compiles into one kernel: 2.5–6× faster solves and
-gradients (:mod:`jrigid._xla` says why and how to opt out).
+gradients (``jrigid._xla`` says why and how to opt out).
 """
 
 from __future__ import annotations

@@ -9,7 +9,7 @@ buffers, so any solve saving more than a handful of times is above 1 kB. Loops h
 ``dot``, a convolution, a scatter or a custom call (LAPACK, ...) are never compiled into
 one kernel, whatever the threshold.
 
-:func:`configure` adds the option to ``XLA_FLAGS``; JAX reads that variable when its
+``configure`` adds the option to ``XLA_FLAGS``; JAX reads that variable when its
 first computation starts its backend, so it acts only if jrigid is imported before then.
 A threshold the user already set (``XLA_FLAGS`` naming the option) is kept: set it to
 ``1024`` to get XLA's default back.
@@ -35,9 +35,9 @@ _EXTRA = re.compile(r"--xla_backend_extra_options=(\S*)")
 
 
 def with_threshold(flags: str, threshold: int = THRESHOLD_BYTES) -> str:
-    """``flags`` (an ``XLA_FLAGS`` value) with :data:`OPTION` set to ``threshold``.
+    """``flags`` (an ``XLA_FLAGS`` value) with ``OPTION`` set to ``threshold``.
 
-    Unchanged if ``flags`` already names :data:`OPTION`; otherwise the option joins an
+    Unchanged if ``flags`` already names ``OPTION``; otherwise the option joins an
     existing ``--xla_backend_extra_options=`` list (comma separated) or is appended.
     """
     if OPTION in flags:
@@ -62,7 +62,7 @@ def _backend_started() -> bool:
 
 
 def configure() -> bool:
-    """Add :data:`OPTION` to ``XLA_FLAGS`` unless set; warn if JAX has already started.
+    """Add ``OPTION`` to ``XLA_FLAGS`` unless set; warn if JAX has already started.
 
     Returns:
         Whether ``XLA_FLAGS`` was changed.
