@@ -2,12 +2,12 @@
 
 XLA:CPU compiles a ``while`` loop into one kernel only when the bytes its loop carries
 are below ``xla_cpu_small_while_loop_byte_threshold`` (1 kB by default). Above it, every
-operation of every iteration is dispatched on its own, and a solve's step costs 2.5–6×
-more (measured, free rotor, rtol 1e-8: 1.45 → 0.51 ms saving 2 times, 2.97 → 0.49 ms saving
-101 times; a reverse-mode gradient 11.6 → 0.80 ms). diffrax's loop carries its output
-buffers, so any solve saving more than a handful of times is above 1 kB. Loops holding a
-``dot``, a convolution, a scatter or a custom call (LAPACK, ...) are never compiled into
-one kernel, whatever the threshold.
+operation of every iteration is dispatched on its own (measured by
+``benchmarks/xla_threshold.py``, free rotor, rtol 1e-8: ``simulate`` 3.9–4.9× slower saving
+2 times, 5.7–5.8× saving 101 times, a reverse-mode gradient through it 13–14×).
+diffrax's loop carries its output buffers, so any solve saving more than a handful of
+times is above 1 kB. Loops holding a ``dot``, a convolution, a scatter or a custom call
+(LAPACK, ...) are never compiled into one kernel, whatever the threshold.
 
 ``configure`` adds the option to ``XLA_FLAGS``; JAX reads that variable when its
 first computation starts its backend, so it acts only if jrigid is imported before then.
@@ -75,7 +75,7 @@ def configure() -> bool:
     if _backend_started():
         warnings.warn(
             "jrigid was imported after JAX ran its first computation, so XLA:CPU keeps "
-            f"its 1 kB {OPTION}: jrigid's solves run 2.5-6x slower. Import jrigid "
+            f"its 1 kB {OPTION}: jrigid's solves run 4-6x slower, gradients 13x. Import jrigid "
             "before running JAX, or set XLA_FLAGS="
             f"--xla_backend_extra_options={OPTION}={THRESHOLD_BYTES} before starting Python.",
             RuntimeWarning,
