@@ -3,11 +3,13 @@
 Each setting runs in a fresh interpreter (``XLA_FLAGS`` is read once, when JAX starts its
 backend): jrigid's 100 MB threshold, and XLA's own 1 kB default (what a process gets when
 the threshold is set back, or when jrigid is imported after JAX has run). Both time the
-same calls, on a free rotor, moments (1, 2, 3), ω0 = (1, 0.3, 0.7), float64:
+same calls, on the free rotor of ``speed_vs_error.py`` (moments (1, 2, 3), ω0 = (1, 0.3,
+0.7), ``harness.Problem``), float64:
 
 * ``simulate`` with its defaults (rtol 1e-8) over t = 0…100, saving 2 and 101 times;
-* a hand-written ``diffrax.diffeqsolve`` of ``(q, ω)`` with ``Tsit5`` and ``PIDController``
-  (rtol 1e-8, atol 1e-10), saving the same 101 times: a peer that imports no jrigid;
+* a hand-written ``diffrax.diffeqsolve`` of ``(q, ω)`` (``Problem.jax_rhs``) with ``Tsit5``
+  and ``PIDController`` (rtol 1e-8, atol 1e-10), saving the same 101 times: the peer, whose
+  loop the threshold changes the same way (it depends on ``XLA_FLAGS`` only);
 * the reverse-mode gradient of a loss over 41 saved states (t = 0…20) with respect to
   the moments and ω0, through ``simulate``'s defaults;
 * ``simulate_many`` over 1024 random ω0, 41 saved times over t = 0…20.
@@ -35,72 +37,58 @@ SETTINGS = {"jrigid (100 MB)": 100_000_000, "XLA default (1 kB)": 1024}
 CASES = {
     "simulate, 2 times": "default call saving t0 and t1",
     "simulate, 101 times": "default call saving 101 times",
-    "hand-written diffrax, 101 times": "(q, ω) + Tsit5, no jrigid imported",
+    "hand-written diffrax, 101 times": "diffeqsolve of (q, ω) + Tsit5",
     "gradient through simulate": "jax.grad of a loss over 41 states",
     "simulate_many, 1024 members": "41 times each",
 }
 
 
 def _child() -> None:
-    """Time every case in this process; print one JSON line."""
+    """Time every case in this process (``XLA_FLAGS`` set by the parent); print JSON."""
+    sys.path.insert(0, str(HERE))
     import diffrax
+    import harness
     import jax
     import jax.numpy as jnp
     import numpy as np
 
-    # The parent sets XLA_FLAGS; the hand-written peer imports no jrigid (as its users do).
+    from jrigid import initial, simulate
+    from jrigid.body import RigidBody
+    from jrigid.ensemble import simulate_many
+    from jrigid.scene import Scene
+
     jax.config.update("jax_enable_x64", True)
-
-    q0 = jnp.array([1.0, 0.0, 0.0, 0.0])
-    w0 = jnp.array([1.0, 0.3, 0.7])
-    moments = jnp.array([1.0, 2.0, 3.0])
+    rotor = harness.Problem(key="free_rotor", title="free rotor", moments=(1.0, 2.0, 3.0),
+                            omega0=(1.0, 0.3, 0.7))
+    scene, state = rotor.scene(), rotor.state()
     calls = {}
-    only = os.environ.get("BENCH_ONLY", "")
-    if only == "hand-written diffrax, 101 times":
-        ts = jnp.linspace(0.0, 100.0, 101)
+    for n in (2, 101):
+        ts = jnp.linspace(0.0, rotor.t1, n)
+        calls[f"simulate, {n} times"] = (
+            jax.jit(lambda s, ts=ts: simulate(scene, s, ts).q), (state,))
 
-        def field(t, y, args):
-            q, w = y
-            dq = 0.5 * jnp.stack([-q[1] * w[0] - q[2] * w[1] - q[3] * w[2],
-                                  q[0] * w[0] + q[2] * w[2] - q[3] * w[1],
-                                  q[0] * w[1] - q[1] * w[2] + q[3] * w[0],
-                                  q[0] * w[2] + q[1] * w[1] - q[2] * w[0]])
-            dw = jnp.cross(args * w, w) / args
-            return dq, dw
+    ts101 = jnp.linspace(0.0, rotor.t1, 101)
 
-        def peer(q0, w0):
-            sol = diffrax.diffeqsolve(
-                diffrax.ODETerm(field), diffrax.Tsit5(), 0.0, 100.0, None, (q0, w0),
-                args=moments, saveat=diffrax.SaveAt(ts=ts),
-                stepsize_controller=diffrax.PIDController(rtol=1e-8, atol=1e-10),
-                max_steps=100_000)
-            return sol.ys[0]
+    def peer(y0):
+        return diffrax.diffeqsolve(
+            diffrax.ODETerm(rotor.jax_rhs()), diffrax.Tsit5(), 0.0, rotor.t1, None, y0,
+            saveat=diffrax.SaveAt(ts=ts101),
+            stepsize_controller=diffrax.PIDController(rtol=1e-8, atol=1e-10),
+            max_steps=100_000).ys
 
-        calls[only] = (jax.jit(peer), (q0, w0))
-    else:
-        from jrigid import initial, simulate
-        from jrigid.body import RigidBody
-        from jrigid.ensemble import simulate_many
-        from jrigid.scene import Scene
+    calls["hand-written diffrax, 101 times"] = (jax.jit(peer), (jnp.asarray(rotor.y0()),))
+    ts41 = jnp.linspace(0.0, 20.0, 41)
 
-        scene = Scene(RigidBody(moments))
-        state = initial.from_omega(q0, w0)
-        for n in (2, 101):
-            ts = jnp.linspace(0.0, 100.0, n)
-            calls[f"simulate, {n} times"] = (
-                jax.jit(lambda s, ts=ts: simulate(scene, s, ts).q), (state,))
-        ts41 = jnp.linspace(0.0, 20.0, 41)
+    def loss(m, w):
+        traj = simulate(Scene(RigidBody(m)), initial.from_omega(state.q, w), ts41)
+        return jnp.sum(traj.omega ** 2) + jnp.sum(traj.q[:, 1])
 
-        def loss(m, w):
-            traj = simulate(Scene(RigidBody(m)), initial.from_omega(q0, w), ts41)
-            return jnp.sum(traj.omega ** 2) + jnp.sum(traj.q[:, 1])
-
-        calls["gradient through simulate"] = (
-            jax.jit(jax.grad(loss, argnums=(0, 1))), (moments, w0))
-        omegas = jnp.asarray(np.random.default_rng(0).normal(size=(1024, 3)))
-        states = jax.vmap(lambda w: initial.from_omega(q0, w))(omegas)
-        calls["simulate_many, 1024 members"] = (
-            lambda s: simulate_many(scene, s, ts41, progress=False)["q"], (states,))
+    calls["gradient through simulate"] = (
+        jax.jit(jax.grad(loss, argnums=(0, 1))), (jnp.array(rotor.moments), state.omega))
+    omegas = jnp.asarray(np.random.default_rng(0).normal(size=(1024, 3)))
+    states = jax.vmap(lambda w: initial.from_omega(state.q, w))(omegas)
+    calls["simulate_many, 1024 members"] = (
+        lambda s: simulate_many(scene, s, ts41, progress=False)["q"], (states,))
     out = {}
     for name, (fn, args) in calls.items():
         start = time.perf_counter()
@@ -117,10 +105,9 @@ def _child() -> None:
     print(json.dumps(out))
 
 
-def _run_child(threshold: int, only: str = "") -> dict:
+def _run_child(threshold: int) -> dict:
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
-    env.update(JAX_PLATFORMS="cpu", BENCH_ONLY=only,
-               XLA_FLAGS=f"--xla_backend_extra_options={OPTION}={threshold}")
+    env.update(JAX_PLATFORMS="cpu", XLA_FLAGS=f"--xla_backend_extra_options={OPTION}={threshold}")
     proc = subprocess.run([sys.executable, __file__, "--child"], env=env, check=True,
                           capture_output=True, text=True)
     return json.loads(proc.stdout.strip().splitlines()[-1])
@@ -142,7 +129,6 @@ def main() -> None:
     results = {}
     for label, threshold in SETTINGS.items():
         results[label] = _run_child(threshold)
-        results[label].update(_run_child(threshold, "hand-written diffrax, 101 times"))
         log(f"{label}: done")
     fast, slow = (results[k] for k in SETTINGS)
     rows = []

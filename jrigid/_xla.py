@@ -4,7 +4,7 @@ XLA:CPU compiles a ``while`` loop into one kernel only when the bytes its loop c
 are below ``xla_cpu_small_while_loop_byte_threshold`` (1 kB by default). Above it, every
 operation of every iteration is dispatched on its own (measured by
 ``benchmarks/xla_threshold.py``, free rotor, rtol 1e-8: ``simulate`` 3.9–4.9× slower saving
-2 times, 5.7–5.8× saving 101 times, a reverse-mode gradient through it 13–14×).
+2 times, 5.7–6.4× saving 101 times, a reverse-mode gradient through it 13–14×).
 diffrax's loop carries its output buffers, so any solve saving more than a handful of
 times is above 1 kB. Loops holding a ``dot``, a convolution, a scatter or a custom call
 (LAPACK, ...) are never compiled into one kernel, whatever the threshold.
