@@ -45,7 +45,7 @@ from jax.typing import ArrayLike
 
 from jrigid import quaternion as quat
 from jrigid._checks import as_float, is_traced
-from jrigid.formulations import get_formulation
+from jrigid.formulations import check_scene, get_formulation
 from jrigid.impacts import (  # the impact mechanics, also importable from here
     apply_impulse,
     box_corners,  # noqa: F401
@@ -341,7 +341,7 @@ def simulate_bounces(
     q0 = quat.normalize(state.q)
     if float(jnp.min(point_positions(q0, state.x, floor.points)[:, 2])) < float(floor.height):
         raise ValueError("the body starts below the floor: raise initial_state.x")
-    formulation.check_scene(scene)
+    check_scene(formulation, scene)
     validate(formulation, scene, state, ts, rtol, atol)
     solver = ProjectedSolver(DEFAULT_SOLVER() if solver is None else solver, formulation)
     y = formulation.from_state(scene, State(q0, state.qdot, state.x, state.v))

@@ -49,7 +49,7 @@ import jax.numpy as jnp
 from jax.typing import ArrayLike
 
 from jrigid import closed_form, splitting
-from jrigid.formulations import AbstractFormulation, get_formulation
+from jrigid.formulations import AbstractFormulation, check_scene, get_formulation
 from jrigid.invariants import Invariants
 from jrigid.scene import Scene
 from jrigid.solve.inputs import input_checks, normalised, prepare, screen, warn_precision
@@ -322,7 +322,7 @@ def simulate(
                 raise ValueError(f"the splitting solver has fixed steps and no {name}")
         state, ts, rtol, atol = prepare(scene, initial_state, ts, None, None, dtype)
         splitting.check_scene(scene)
-        formulation.check_scene(scene)
+        check_scene(formulation, scene)
         bound = solver.bound(ts)
         traj, cause, messages = splitting.solve(
             scene, state, ts, rtol, atol, formulation, solver, bound
@@ -335,7 +335,7 @@ def simulate(
             )
         state, ts, rtol, atol = prepare(scene, initial_state, ts, None, None, dtype)
         closed_form.check_scene(scene)
-        formulation.check_scene(scene)
+        check_scene(formulation, scene)
         traj, cause, messages = closed_form.solve(
             scene, state, ts, rtol, atol, formulation, bool(dense)
         )
@@ -346,7 +346,7 @@ def simulate(
     ):
         adjoint = diffrax.ForwardMode()
     state, ts, rtol, atol = prepare(scene, initial_state, ts, rtol, atol, dtype)
-    formulation.check_scene(scene)
+    check_scene(formulation, scene)
     _check_saveat(saveat)
     warn_precision(state, ts, rtol)
     if stepsize_controller is not None:

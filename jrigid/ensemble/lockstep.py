@@ -39,7 +39,7 @@ import jax.numpy as jnp
 import optimistix as optx
 from jax.typing import ArrayLike
 
-from jrigid.formulations import AbstractFormulation, get_formulation
+from jrigid.formulations import AbstractFormulation, check_scene, get_formulation
 from jrigid.invariants import Invariants
 from jrigid.scene import Scene
 from jrigid.solve.inputs import input_checks, normalised, prepare, screen
@@ -212,7 +212,7 @@ def simulate_lockstep(
     states, ts, rtol, atol = jax.vmap(
         lambda s: prepare(scene, s, ts, rtol, atol, dtype), out_axes=(0, None, None, None)
     )(initial_states)
-    formulation.check_scene(scene)
+    check_scene(formulation, scene)
     scene_axis = 0 if batched_scene else None
     project = bool(project) and formulation.carries_quaternion
     traj, cause, messages = _solve(scene, states, ts, rtol, atol, dt0, formulation, solver,
