@@ -70,7 +70,7 @@ import harness  # noqa: E402
 from harness import Problem  # noqa: E402
 
 from jrigid.integrate import DEFAULT_SOLVER, simulate  # noqa: E402
-from jrigid.solvers import FusedDopri8, FusedTsit5  # noqa: E402
+from jrigid.solvers import FusedDop853, FusedDopri8, FusedTsit5  # noqa: E402
 
 TARGETS = (1e-4, 1e-6, 1e-8, 1e-10)
 DEFAULT = "jrigid default"
@@ -280,6 +280,8 @@ def method_list(problem: Problem, *, quick: bool):
         methods += [
             ("jrigid quaternion_acceleration + FusedDopri8", "jrigid",
              dict(solver=FusedDopri8())),
+            ("jrigid quaternion_acceleration + FusedDop853", "jrigid",
+             dict(solver=FusedDop853())),
             ("jrigid quaternion_acceleration + FusedTsit5", "jrigid",
              dict(solver=FusedTsit5())),
             ("jrigid quaternion_omega", "jrigid", dict(formulation="quaternion_omega")),

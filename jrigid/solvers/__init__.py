@@ -9,10 +9,15 @@ subclasses: ``diffrax.diffeqsolve`` with its step-size controllers, ``SaveAt``, 
 and adjoints works with them as with diffrax's own.
 
 - :class:`FusedTsit5` — Tsitouras' 5(4) pair, 7 stages (FSAL), 4th-order dense output;
-- :class:`FusedDopri8` — Dormand–Prince 8(7), 14 stages (FSAL), 7th-order dense output.
+- :class:`FusedDopri8` — Dormand–Prince 8(7), 14 stages (FSAL), 7th-order dense output
+  (inaccurate inside steps: see its docstring);
+- :class:`FusedDop853` — Hairer's DOP853 (scipy's ``DOP853``), 13 stages (FSAL) and 3
+  more for its 7th-order dense output, error estimate from a 5th- and a 3rd-order one.
 
-The tableaus are diffrax's own (``diffrax.Tsit5.tableau``, ``diffrax.Dopri8.tableau``),
-so each fused solver takes the same steps as its diffrax counterpart up to rounding.
+The first two tableaus are diffrax's own (``diffrax.Tsit5.tableau``,
+``diffrax.Dopri8.tableau``), so each takes the same steps as its diffrax counterpart up
+to rounding; :class:`FusedDop853`'s step, error estimate and dense output are scipy's
+(tested against it), with diffrax's step-size controller.
 """
 
 from jrigid.solvers import fused, pairs  # noqa: I001

@@ -77,18 +77,27 @@ class FusedRungeKutta(diffrax.AbstractAdaptiveSolver):
     Subclasses set :attr:`tableau` (a ``diffrax.ButcherTableau`` of an explicit pair
     whose last stage is evaluated at the step's end, first-same-as-last),
     :attr:`interpolation_cls` (a :class:`PolynomialInterpolation` subclass over all the
-    stages) and ``order``. ``terms`` must be a single ``diffrax.ODETerm``.
+    stages) and ``order``; a pair whose dense output needs more stages than the step
+    lists them in :attr:`extra_stages`, and one with another error estimate overrides
+    :meth:`error_estimate`. ``terms`` must be a single ``diffrax.ODETerm``.
     """
 
     tableau: ClassVar[diffrax.ButcherTableau]
     term_structure: ClassVar = diffrax.AbstractTerm
     interpolation_cls: ClassVar[Callable[..., PolynomialInterpolation]]
+    #: ``((a_row, c), ...)``: stages evaluated after the step for its dense output only
+    #: (``a_row`` over all the stages before it, the first-same-as-last one included).
+    extra_stages: ClassVar[tuple] = ()
 
     def init(self, terms, t0, t1, y0, args):
         return ravel_pytree(terms.vf(t0, y0, args))[0]
 
     def func(self, terms, t0, y0, args):
         return terms.vf(t0, y0, args)
+
+    def error_estimate(self, h, stages):
+        """The local error estimate ``(n,)`` from the step's stages (``h Σ βᵢ kᵢ``)."""
+        return _combination(None, h, self.tableau.b_error, stages)
 
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
         tab = self.tableau
@@ -104,16 +113,13 @@ class FusedRungeKutta(diffrax.AbstractAdaptiveSolver):
             lambda: solver_state,
         )
         stages = [f0]
-        y_stage = flat0
-        for row, c in zip(tab.a_lower, tab.c, strict=True):
-            y_stage = _combination(flat0, h, row, stages)
-            t_stage = t1 if float(c) == 1.0 else t0 + float(c) * h
-            # A barrier per stage: XLA would otherwise fuse a stage's vector field into
-            # every later stage that uses it, recomputing it (measured: up to 4x slower).
-            stages.append(jax.lax.optimization_barrier(field(t_stage, y_stage)))
-        # First-same-as-last: the last stage is evaluated at (t1, y1).
-        flat1 = y_stage
-        error = _combination(None, h, tab.b_error, stages)
+        # First-same-as-last: the last row's stage is evaluated at (t1, y1).
+        flat1 = _append_stages(field, t0, t1, flat0, stages, tab.a_lower, tab.c)
+        error = self.error_estimate(h, stages)
+        f1 = stages[-1]
+        if self.extra_stages:
+            rows, cs = zip(*self.extra_stages, strict=True)
+            _append_stages(field, t0, t1, flat0, stages, rows, cs)
         dense_info = dict(
             y0=y0, y1=unravel(flat1), f=jax.vmap(unravel)(jnp.stack(stages))
         )
@@ -121,6 +127,20 @@ class FusedRungeKutta(diffrax.AbstractAdaptiveSolver):
             unravel(flat1),
             unravel(error),
             dense_info,
-            stages[-1],
+            f1,
             diffrax.RESULTS.successful,
         )
+
+
+def _append_stages(field, t0, t1, flat0, stages, rows, cs):
+    """Evaluate the stages of ``rows`` (coefficients over ``stages``) at nodes ``cs``,
+    appending each to ``stages``; return the state of the last one."""
+    h = t1 - t0
+    y_stage = flat0
+    for row, c in zip(rows, cs, strict=True):
+        y_stage = _combination(flat0, h, row, stages)
+        t_stage = t1 if float(c) == 1.0 else t0 + float(c) * h
+        # A barrier per stage: XLA would otherwise fuse a stage's vector field into
+        # every later stage that uses it, recomputing it (measured: up to 4x slower).
+        stages.append(jax.lax.optimization_barrier(field(t_stage, y_stage)))
+    return y_stage
