@@ -1,9 +1,9 @@
 """Importing jrigid raises XLA:CPU's small-while-loop threshold (``jrigid._xla``).
 
 The mechanism is checked where it acts: in a fresh interpreter, the compiled program of a
-default solve saving 101 times holds its loop as one kernel (a call XLA marks
-``xla_cpu_small_call``) when jrigid was imported first, and not when the threshold is
-XLA's 1 kB default.
+solve saving 101 times (the default solver and the eighth-order pairs) holds each of its
+loops as one kernel (every ``while`` a call XLA marks ``xla_cpu_small_call``) when jrigid
+was imported first, and not when the threshold is XLA's 1 kB default.
 """
 
 from __future__ import annotations
@@ -50,24 +50,32 @@ def _run(code: str, xla_flags: str | None) -> subprocess.CompletedProcess:
 
 _COMPILED_SOLVE = """
     import os
+    import re
     import jax
     jax.config.update("jax_enable_x64", True)
     import jax.numpy as jnp
-    from jrigid import initial, simulate
+    from jrigid import initial, simulate, solvers
     from jrigid.body import RigidBody
     from jrigid.scene import Scene
 
     scene = Scene(RigidBody((1.0, 2.0, 3.0)))
     state = initial.from_omega(jnp.array([1.0, 0.0, 0.0, 0.0]), jnp.array([1.0, 0.3, 0.7]))
     ts = jnp.linspace(0.0, 10.0, 101)
-    text = jax.jit(lambda s: simulate(scene, s, ts).q).lower(state).compile().as_text()
+    solver = {solver}
+    solve = jax.jit(lambda s: simulate(scene, s, ts, solver=solver).q)
+    text = solve.lower(state).compile().as_text()
     print(os.environ["XLA_FLAGS"])
-    print("one kernel" if "xla_cpu_small_call" in text else "dispatched")
+    loops = len(re.findall(r"[ ]while[(]", text))
+    kernels = text.count("xla_cpu_small_call")
+    print("one kernel" if loops and kernels == loops else "dispatched")
 """
 
 
-def test_import_compiles_a_solve_loop_into_one_kernel():
-    out = _run(_COMPILED_SOLVE, xla_flags=None)
+@pytest.mark.parametrize("solver", ["None", "solvers.FusedDopri8()", "solvers.FusedDop853()"])
+def test_import_compiles_a_solve_loop_into_one_kernel(solver):
+    # The default and the eighth-order pairs, saving 101 times (their dense output is
+    # evaluated inside the loop: a matrix product there would keep it dispatched).
+    out = _run(_COMPILED_SOLVE.replace("{solver}", solver), xla_flags=None)
     assert out.returncode == 0, out.stderr
     flags, verdict = out.stdout.split("\n")[:2]
     assert flags == f"--xla_backend_extra_options={OPTION}=100000000"
@@ -76,7 +84,8 @@ def test_import_compiles_a_solve_loop_into_one_kernel():
 
 
 def test_a_threshold_set_by_the_user_is_kept():
-    out = _run(_COMPILED_SOLVE, xla_flags=f"--xla_backend_extra_options={OPTION}=1024")
+    out = _run(_COMPILED_SOLVE.replace("{solver}", "None"),
+               xla_flags=f"--xla_backend_extra_options={OPTION}=1024")
     assert out.returncode == 0, out.stderr
     flags, verdict = out.stdout.split("\n")[:2]
     assert flags == f"--xla_backend_extra_options={OPTION}=1024"
