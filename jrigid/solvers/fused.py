@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.flatten_util import ravel_pytree
 
-__all__ = ["FusedRungeKutta", "PolynomialInterpolation"]
+__all__ = ["FusedRungeKutta", "PolynomialInterpolation", "StageInterpolation"]
 
 
 def _combination(base, h, coefficients, stages):
@@ -29,7 +29,29 @@ def _combination(base, h, coefficients, stages):
     return total * h if base is None else base + h * total
 
 
-class PolynomialInterpolation(diffrax.AbstractLocalInterpolation):
+class StageInterpolation(diffrax.AbstractLocalInterpolation):
+    """Dense output of one step from its stages (abstract).
+
+    Subclasses hold the step's ``t0``, ``t1`` and what they need of diffrax's
+    ``dense_info`` (``y0``, ``y1``, the stages ``f``), and give the state at ``t0 + θh``
+    in :meth:`point`; :meth:`evaluate` is diffrax's interface over it.
+    """
+
+    def point(self, h, theta):
+        """The state at ``t0 + θ h`` (``h = t1 − t0``; ``θ`` a scalar in ``[0, 1]``)."""
+        raise NotImplementedError
+
+    def evaluate(self, t0, t1=None, left=True):
+        del left
+        if t1 is not None:
+            return jax.tree_util.tree_map(
+                lambda a, b: a - b, self.evaluate(t1), self.evaluate(t0)
+            )
+        h = self.t1 - self.t0  # pyright: ignore
+        return self.point(h, (t0 - self.t0) / jnp.where(h == 0, 1, h))  # pyright: ignore
+
+
+class PolynomialInterpolation(StageInterpolation):
     """Dense output ``y(t0 + θh) = y0 + h Σᵢ bᵢ(θ) fᵢ`` of one step.
 
     ``bᵢ(θ) = Σⱼ B[i, j] θ^(j+1)`` with the class's coefficient matrix ``B`` (subclasses
@@ -54,14 +76,7 @@ class PolynomialInterpolation(diffrax.AbstractLocalInterpolation):
         self.y0 = y0
         self.f = f
 
-    def evaluate(self, t0, t1=None, left=True):
-        del left
-        if t1 is not None:
-            return jax.tree_util.tree_map(
-                lambda a, b: a - b, self.evaluate(t1), self.evaluate(t0)
-            )
-        h = self.t1 - self.t0
-        theta = (t0 - self.t0) / jnp.where(h == 0, 1, h)
+    def point(self, h, theta):
         dtype = jnp.result_type(theta)
         coeffs = jnp.asarray(self.coefficients, dtype)
         powers = theta ** jnp.arange(1, coeffs.shape[1] + 1, dtype=dtype)

@@ -11,7 +11,12 @@ import numpy as np
 from numpy.polynomial import Polynomial
 from scipy.integrate._ivp import dop853_coefficients as _dop853
 
-from jrigid.solvers.fused import FusedRungeKutta, PolynomialInterpolation, _combination
+from jrigid.solvers.fused import (
+    FusedRungeKutta,
+    PolynomialInterpolation,
+    StageInterpolation,
+    _combination,
+)
 
 __all__ = ["FusedDop853", "FusedDopri8", "FusedTsit5"]
 
@@ -99,7 +104,7 @@ def _dop853_tableau() -> diffrax.ButcherTableau:
     )
 
 
-class _Dop853Dense(diffrax.AbstractLocalInterpolation):
+class _Dop853Dense(StageInterpolation):
     """DOP853's 7th-order continuous extension (Hairer's, as scipy's).
 
     ``y(t0 + θh) = y0 + θ(F0 + (1−θ)(F1 + θ(F2 + (1−θ)(F3 + θ(F4 + (1−θ)(F5 + θF6))))))``
@@ -117,14 +122,7 @@ class _Dop853Dense(diffrax.AbstractLocalInterpolation):
     y1: object
     f: object
 
-    def evaluate(self, t0, t1=None, left=True):
-        del left
-        if t1 is not None:
-            return jax.tree_util.tree_map(
-                lambda a, b: a - b, self.evaluate(t1), self.evaluate(t0)
-            )
-        h = self.t1 - self.t0
-        x = (t0 - self.t0) / jnp.where(h == 0, 1, h)
+    def point(self, h, x):
         u = 1 - x
         # The weight of each F_j in the nested form: x, x u, x² u, x² u², x³ u², x³ u³, x⁴ u³.
         w = [x, x * u]
