@@ -34,7 +34,7 @@ class StageInterpolation(diffrax.AbstractLocalInterpolation):
 
     Subclasses hold the step's ``t0``, ``t1`` and what they need of diffrax's
     ``dense_info`` (``y0``, ``y1``, the stages ``f``), and give the state at ``t0 + θh``
-    in :meth:`point`; :meth:`evaluate` is diffrax's interface over it.
+    in :meth:`point`; ``evaluate`` is diffrax's interface over it.
     """
 
     def point(self, h, theta):
@@ -42,6 +42,7 @@ class StageInterpolation(diffrax.AbstractLocalInterpolation):
         raise NotImplementedError
 
     def evaluate(self, t0, t1=None, left=True):
+        """The state at ``t0``, or its increment from ``t0`` to ``t1`` (diffrax's interface)."""
         del left
         if t1 is not None:
             return jax.tree_util.tree_map(
@@ -91,7 +92,7 @@ class FusedRungeKutta(diffrax.AbstractAdaptiveSolver):
 
     Subclasses set :attr:`tableau` (a ``diffrax.ButcherTableau`` of an explicit pair
     whose last stage is evaluated at the step's end, first-same-as-last),
-    :attr:`interpolation_cls` (a :class:`PolynomialInterpolation` subclass over all the
+    :attr:`interpolation_cls` (a :class:`StageInterpolation` subclass over all the
     stages) and ``order``; a pair whose dense output needs more stages than the step
     lists them in :attr:`extra_stages`, and one with another error estimate overrides
     :meth:`error_estimate`. ``terms`` must be a single ``diffrax.ODETerm``.
@@ -99,7 +100,7 @@ class FusedRungeKutta(diffrax.AbstractAdaptiveSolver):
 
     tableau: ClassVar[diffrax.ButcherTableau]
     term_structure: ClassVar = diffrax.AbstractTerm
-    interpolation_cls: ClassVar[Callable[..., PolynomialInterpolation]]
+    interpolation_cls: ClassVar[Callable[..., StageInterpolation]]
     #: ``((a_row, c), ...)``: stages evaluated after the step for its dense output only
     #: (``a_row`` over all the stages before it, the first-same-as-last one included).
     extra_stages: ClassVar[tuple] = ()

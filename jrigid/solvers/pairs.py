@@ -151,9 +151,10 @@ class FusedDop853(FusedRungeKutta):
     Measured on free rotors (``simulate``, rtol 1e-6 to 1e-12, 2001 output times): error
     inside steps 0.6–3·rtol against 6–23·rtol for :class:`FusedDopri8`. Its global
     error per tolerance grows on long runs (up to 30·rtol over 100 time units near the
-    intermediate axis, 130·rtol on a heavy top), where :class:`FusedTsit5`'s shrinks;
-    at equal error it is the faster pair below about 1e-8 (measured in
-    ``benchmarks/speed_vs_error.py``).
+    intermediate axis, 130·rtol on a heavy top), where :class:`FusedTsit5`'s shrinks.
+    At equal error, on the quaternion-acceleration form, it beats :class:`FusedTsit5`
+    only at tight tolerances: 1.06–1.14× at 1e-10 on free rotors, 1.5–2.1× on a heavy
+    top from 1e-6 to 1e-8 (``benchmarks/speed_vs_error.py``).
     """
 
     tableau: ClassVar[diffrax.ButcherTableau] = _dop853_tableau()
