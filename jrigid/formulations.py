@@ -337,13 +337,21 @@ def _default_instance(name: str) -> AbstractFormulation:
     return FORMULATIONS[name]()
 
 
-def check_scene(formulation: AbstractFormulation, scene: Scene) -> None:
+def check_scene(formulation: str | AbstractFormulation, scene: Scene) -> None:
     """``formulation.check_scene(scene)``, called through the class.
 
     Reading a method off an equinox module builds a bound-method module (about 30 µs
     here, measured with equinox 0.13.8), which a plain ``simulate`` call would pay on
     every call; the class's function is the same method without that wrapper.
+
+    Args:
+        formulation: a formulation object or name (:func:`get_formulation`).
+        scene: the :class:`~jrigid.scene.Scene`.
+
+    Raises:
+        ValueError: an unknown formulation, or a scene it cannot represent.
     """
+    formulation = get_formulation(formulation)
     type(formulation).check_scene(formulation, scene)
 
 

@@ -22,7 +22,7 @@ from scipy.spatial.transform import Rotation
 
 from jrigid import initial
 from jrigid.body import RigidBody
-from jrigid.formulations import FORMULATIONS, get_formulation
+from jrigid.formulations import FORMULATIONS, check_scene, get_formulation
 from jrigid.integrate import simulate
 from jrigid.leapfrog import leapfrog
 from jrigid.scene import Gravity, Pivot, Scene, Torque
@@ -171,3 +171,14 @@ def test_unknown_formulation_names_the_choices():
     assert get_formulation("quaternion_omega") is get_formulation("quaternion_omega")
     with pytest.raises(ValueError, match="unknown formulation 'matrix'.*body_omega"):
         get_formulation("matrix")
+
+
+def test_check_scene_by_object_or_name_and_its_errors():
+    pivoted = Scene(RigidBody(jnp.array([1.0, 1.0, 0.5]), 1.0, jnp.array([0.0, 0.0, 1.0])),
+                    Pivot(), (Gravity(1.0),))
+    check_scene("quaternion_acceleration", pivoted)
+    check_scene(get_formulation("quaternion_omega"), pivoted)
+    with pytest.raises(ValueError, match="body_omega carries no orientation"):
+        check_scene("body_omega", pivoted)
+    with pytest.raises(ValueError, match="unknown formulation 'matrix'"):
+        check_scene("matrix", pivoted)
