@@ -8,8 +8,10 @@ putting ``benchmarks/`` on ``sys.path``). It holds:
 - :class:`Problem` — a benchmark problem (a free rotor or a heavy top): its scene, initial
   state and the numpy/JAX right-hand sides a user would write by hand;
 - :func:`machine_info` / :func:`machine_line` — CPU model, cores, load, library versions;
-- :func:`compile_jax` — ahead-of-time ``lower(...).compile()`` of a jitted function, so
-  compile time is measured on its own and never mixed into run times;
+- :func:`warm_jit` — the first call of a ``jax.jit`` function timed on its own (trace and
+  compile), so compile time is never mixed into run times, and the function returned
+  warm; :func:`compile_jax` — ahead-of-time ``lower(...).compile()``, for a compiled
+  program's memory analysis;
 - :func:`time_runs` — median (and min/max) wall time of several calls, each blocked with
   ``jax.block_until_ready``;
 - :func:`time_interleaved` — several calls timed in alternating rounds, so that load
@@ -33,6 +35,7 @@ so a benchmark can parse its command line and set XLA flags before JAX starts.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import os
@@ -54,6 +57,8 @@ __all__ = [
     "Timing",
     "command_line",
     "compile_jax",
+    "scalar",
+    "warm_jit",
     "fmt_seconds",
     "machine_info",
     "machine_line",
@@ -392,7 +397,7 @@ def time_runs(
 
     Args:
         fn: zero-argument callable (for JAX: an already compiled function, see
-            :func:`compile_jax`, so no compile time is included).
+            :func:`warm_jit`, so no compile time is included).
         repeats: minimum number of timed calls, ``≥ 1``.
         warmup: untimed calls first (allocation, caches).
         min_time: target total timed seconds (extra repeats for fast calls).
@@ -419,8 +424,44 @@ def time_runs(
     return Timing(runs), out
 
 
+@functools.cache
+def scalar(x: float, dtype: str = "float64"):
+    """``jnp.asarray(x, dtype)``, made once per value: converting a tolerance on every
+    timed call would add about 10 µs to each."""
+    import jax.numpy as jnp
+
+    return jnp.asarray(x, dtype)
+
+
+def warm_jit(jitted, *args, **kwargs) -> tuple[Callable, float]:
+    """Call ``jitted`` (a ``jax.jit`` function) once to trace and compile it; time that.
+
+    The timed calls then go through ``jax.jit``'s C++ dispatch, which is what a user
+    calling a jitted function gets. (An ahead-of-time ``Compiled`` object dispatches
+    through Python: on this machine that adds 50–100 µs per call for a solve with a few
+    pytree inputs, more than a whole loose-tolerance solve takes.) Later calls must use
+    arguments of the same shapes, dtypes and weak types, or JAX compiles again.
+
+    Returns:
+        ``(jitted, seconds)``: the warm function and the time of its first call (tracing,
+        lowering, XLA compilation) less the median of three more calls (the run itself).
+    """
+    start = time.perf_counter()
+    _block(jitted(*args, **kwargs))
+    first = time.perf_counter() - start
+    runs = []
+    for _ in range(3):
+        start = time.perf_counter()
+        _block(jitted(*args, **kwargs))
+        runs.append(time.perf_counter() - start)
+    return jitted, max(first - statistics.median(runs), 0.0)
+
+
 def compile_jax(jitted, *args, **kwargs) -> tuple[Callable, float]:
     """Compile ``jitted`` (a ``jax.jit`` function) ahead of time for these arguments.
+
+    For a compiled program's ``memory_analysis``; calls of the result dispatch through
+    Python, slower than ``jax.jit``'s own (time calls with :func:`warm_jit` instead).
 
     Returns:
         ``(compiled, seconds)``: the compiled executable (call it with arguments of the

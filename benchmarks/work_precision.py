@@ -36,7 +36,7 @@ and gimbal lock (case 8).
 The error is the worst of the relative final ω error and the sign-invariant final ``q``
 error, against :func:`hard_cases.reference` (``jrigid.exact`` or scipy DOP853 at rtol
 1e-13 cross-checked with a second set of equations). Times are wall-clock after
-compilation (every jrigid (formulation, solver) is compiled ahead of time once per scene
+compilation (every jrigid (formulation, solver) is jitted and compiled once per scene
 structure and reused across cases: the scene's arrays are inputs), medians of interleaved
 rounds (``harness.time_interleaved``); calls slower than ``SLOW`` seconds are timed once,
 and a method's tighter tolerances are skipped after a call slower than ``BUDGET``.
@@ -120,7 +120,7 @@ FIGURE_CASES = ("general", "separatrix_1e-6", "top_fast_20", "top_fast_100", "lo
 
 
 class Compiled:
-    """Cache of ahead-of-time compiled solves, keyed by (scene kind, dtype, method)."""
+    """Cache of compiled (jitted, warm) solves, keyed by (scene kind, dtype, method)."""
 
     def __init__(self, log):
         self.fns: dict[tuple, Callable] = {}
@@ -166,13 +166,13 @@ def jrigid_runner(case, size, formulation, solver_name, cache: Compiled):
             return _final(traj, dtype)
 
         with _x64(case):
-            return harness.compile_jax(jax.jit(solve), scene, state, ts, jnp.asarray(1e-6, dtype))
+            return harness.warm_jit(jax.jit(solve), scene, state, ts, harness.scalar(1e-6, dtype))
 
     fn, seconds = cache.get((_kind(case), case.dtype, formulation, solver_name), build)
 
     def run(rtol):
         with _x64(case):
-            return fn(scene, state, ts, jnp.asarray(rtol, dtype))
+            return fn(scene, state, ts, harness.scalar(rtol, dtype))
 
     return run, seconds
 
@@ -191,13 +191,13 @@ def _stepped_runner(case, size, cache: Compiled, name: str, integrate):
             return _final(integrate(scene, state, ts, dt), dtype)
 
         with _x64(case):
-            return harness.compile_jax(jax.jit(solve), scene, state, ts, jnp.asarray(0.1, dtype))
+            return harness.warm_jit(jax.jit(solve), scene, state, ts, harness.scalar(0.1, dtype))
 
     fn, seconds = cache.get((_kind(case), case.dtype, name), build)
 
     def run(dt):
         with _x64(case):
-            return fn(scene, state, ts, jnp.asarray(dt, dtype))
+            return fn(scene, state, ts, harness.scalar(dt, dtype))
 
     return run, seconds
 
@@ -231,7 +231,7 @@ def exact_runner(case, size, cache: Compiled):
             return _final(simulate(scene, state, ts, solver="exact", throw=False), dtype)
 
         with _x64(case):
-            return harness.compile_jax(jax.jit(solve), scene, state, ts)
+            return harness.warm_jit(jax.jit(solve), scene, state, ts)
 
     fn, seconds = cache.get((_kind(case), case.dtype, "exact"), build)
 
@@ -761,7 +761,7 @@ def _overview(results: list[dict], targets) -> list[str]:
 def compile_lines(cache: Compiled) -> list[str]:
     rows = [[" / ".join(map(str, k)), f"{s:.1f} s"] for k, s in cache.seconds.items()]
     return ["## Compile times", "",
-            "Each jrigid (scene structure, dtype, method) is compiled once ahead of time and "
+            "Each jrigid (scene structure, dtype, method) is compiled once (its first call) and "
             "reused for every case of that structure.", "",
             harness.markdown_table(["scene / dtype / method", "compile"], rows), ""]
 
