@@ -52,10 +52,12 @@ from jrigid import closed_form, splitting
 from jrigid.formulations import AbstractFormulation, check_scene, get_formulation
 from jrigid.invariants import Invariants
 from jrigid.scene import Scene
+from jrigid.solve.flat import Flat
 from jrigid.solve.inputs import input_checks, normalised, prepare, screen, warn_precision
 from jrigid.solve.outcome import classify, finish, raise_on_failure
 from jrigid.solve.stepping import (  # DEFAULT_SOLVER: also named here
     DEFAULT_SOLVER,  # noqa: F401
+    ProjectedSolver,
     controller,
     projected,
     run,
@@ -169,40 +171,46 @@ def _solve_body(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoint,
     invalid, cause, scene, state, ts, rtol, atol = screen(checks, scene, state, ts, rtol, atol)
     state = normalised(state)
     y0 = formulation.from_state(scene, state)
+    flat = Flat.of(formulation, y0)  # one array in the loop: fewer operations per step
     user_saveat = saveat is not None
     if saveat is None:
         saveat = diffrax.SaveAt(ts=ts, t1=True, dense=dense)
     manifold, restore = project
     if manifold and formulation.carries_quaternion:
         invariants = Invariants.of(scene, state.q, state.omega) if restore else None
-        solver, saveat = projected(solver, formulation, invariants, saveat)
+        solver = projected(solver, flat, invariants)
     if stepsize_controller is None:
         stepsize_controller = controller(ts, rtol, atol)
-    sol = run(formulation, solver, ts, dt0, y0, scene, saveat=saveat,
+    sol = run(flat, solver, ts, dt0, flat.ravel(y0), scene, saveat=saveat,
               stepsize_controller=stepsize_controller, adjoint=adjoint, max_steps=max_steps,
-              event=formulation.event() if event is None else event)
-    interpolation = sol.interpolation if (dense or saveat.dense) else None
+              event=flat.event(formulation.event() if event is None else event))
+    ys = sol.ys
+    if isinstance(solver, ProjectedSolver):
+        ys = solver.outputs(ys, scene, flat.ravel(y0))
+    ys = flat.states(ys)
+    interpolation = flat.interpolation(sol.interpolation) if (dense or saveat.dense) else None
     if user_saveat:
-        traj = _finish_saved(scene, formulation, ts, sol, interpolation, invalid, event)
+        traj = _finish_saved(scene, formulation, ts, sol, ys, interpolation, invalid, event)
     else:
-        traj = finish(scene, formulation, ts, sol.ts, sol.ys, sol.result, sol.stats,
+        traj = finish(scene, formulation, ts, sol.ts, ys, sol.result, sol.stats,
                       interpolation, invalid, user_event=event is not None)
     return traj, cause, messages
 
 
-def _finish_saved(scene, formulation, ts, sol, interpolation, invalid, event):
+def _finish_saved(scene, formulation, ts, sol, ys, interpolation, invalid, event):
     """The trajectory of a user's ``SaveAt``: its times as diffrax filled them (``inf``
-    padding becomes NaN outputs)."""
+    padding becomes NaN outputs); ``ys`` are the saved states as the formulation's
+    variables."""
     saved = jnp.isfinite(sol.ts) & ~invalid
     t_end = jnp.max(jnp.where(jnp.isfinite(sol.ts), sol.ts, -jnp.inf))
     i_end = jnp.argmax(sol.ts == t_end)
-    y_end = jax.tree_util.tree_map(lambda a: a[i_end], sol.ys)
+    y_end = jax.tree_util.tree_map(lambda a: a[i_end], ys)
 
     def _mask(a):
         keep = saved.reshape(saved.shape + (1,) * (a.ndim - 1))
         return jnp.where(keep, a, jnp.nan)
 
-    ys = jax.tree_util.tree_map(_mask, sol.ys)
+    ys = jax.tree_util.tree_map(_mask, ys)
     filled = jax.tree_util.tree_map(lambda a: jnp.where(jnp.isnan(a), 0.0, a), ys)
     result = classify(sol.result, formulation, scene, y_end, t_end, filled, ts[-1] - ts[0],
                       event is not None)

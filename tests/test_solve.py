@@ -6,6 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from _simulate import (
+    MOMENTS,
     OMEGA0,
     Q0,
     free_scene,
@@ -46,3 +47,105 @@ def test_precision_problem_threshold():
     assert precision_problem(state64, jnp.asarray([0.0, 1e12]), jnp.asarray(1e-10)) is None
     traced = jax.jit(lambda s: precision_problem(s, ts, rtol) is None)
     assert traced(state)
+
+
+# --------------------------------------------------------------------------- flat state
+
+
+def _translating_scene():
+    from jrigid import FreeFlight, Gravity, RigidBody, Scene
+
+    return Scene(RigidBody(MOMENTS, mass=2.0), holder=FreeFlight(), loads=(Gravity(9.8),))
+
+
+@pytest.mark.parametrize("name", ["quaternion_acceleration", "quaternion_omega", "euler_angles"])
+def test_flat_layout_round_trips_and_evaluates_the_formulation(name):
+    """ravel ∘ unravel is the identity on every leaf (translation included), and the flat
+    vector field and projection are the formulation's, raveled."""
+    from jrigid.formulations import get_formulation
+    from jrigid.solve import Flat
+
+    formulation = get_formulation(name)
+    scene = _translating_scene()
+    state = initial.from_omega(Q0, OMEGA0, x=jnp.array([1.0, 2.0, 3.0]),
+                               v=jnp.array([0.5, -0.5, 2.0]))
+    y = formulation.from_state(scene, state)
+    flat = Flat.of(formulation, y)
+    y_flat = flat.ravel(y)
+    n = sum(a.size for a in jax.tree_util.tree_leaves(y))
+    assert y_flat.shape == (n,)
+    back = flat.unravel(y_flat)
+    assert jax.tree_util.tree_structure(back) == jax.tree_util.tree_structure(y)
+    for a, b in zip(jax.tree_util.tree_leaves(back), jax.tree_util.tree_leaves(y), strict=True):
+        np.testing.assert_array_equal(a, b)
+    expected = formulation.vector_field(0.3, y, scene)
+    np.testing.assert_allclose(flat.vector_field(0.3, y_flat, scene), flat.ravel(expected),
+                               rtol=1e-15, atol=0)
+    stretched = y_flat * 1.01
+    np.testing.assert_allclose(flat.project(stretched, scene),
+                               flat.ravel(formulation.project(flat.unravel(stretched), scene)),
+                               rtol=1e-15, atol=0)
+    states = flat.states(jnp.stack([y_flat, 2 * y_flat]))
+    np.testing.assert_array_equal(jax.tree_util.tree_leaves(states)[0][1],
+                                  2 * jax.tree_util.tree_leaves(y)[0])
+    assert Flat.of(formulation, y) == flat  # static layout: equal across traces
+
+
+def test_user_event_sees_the_formulation_state():
+    """A user's event condition gets the formulation's own variables (a State with q and
+    q̇), not the flat array the loop carries: it stops where q₀ changes sign."""
+    import diffrax
+    import optimistix as optx
+
+    seen = []
+
+    def cond(t, y, args, **kwargs):
+        seen.append(type(y).__name__)
+        return y.q[0]
+
+    state = initial.from_omega(jnp.array([1.0, 0.0, 0.0, 0.0]), jnp.array([0.0, 0.0, 1.0]))
+    event = diffrax.Event(cond, root_finder=optx.Newton(1e-10, 1e-10))
+    traj = simulate(free_scene(), state, jnp.linspace(0.0, 10.0, 11), event=event, throw=False)
+    # q = (cos(t/2), 0, 0, sin(t/2)): q₀ = 0 at t = π
+    np.testing.assert_allclose(float(traj.t_stop), np.pi, rtol=1e-7)
+    assert set(seen) == {"State"}
+
+
+def test_dense_output_gives_the_formulation_state():
+    """Trajectory.at on a flat solve returns the formulation's variables: at the output
+    times it agrees with the saved trajectory to the interpolation's accuracy."""
+    ts = jnp.linspace(0.0, 5.0, 11)
+    state = initial.from_omega(Q0, OMEGA0)
+    traj = simulate(free_scene(), state, ts, dense=True)
+    again = traj.at(ts[1:-1])
+    assert type(again.y).__name__ == "State" and again.y.q.shape == (9, 4)
+    np.testing.assert_allclose(again.omega, traj.omega[1:-1], atol=1e-7)
+
+
+def test_saved_outputs_are_projected_and_unfilled_slots_kept():
+    """ProjectedSolver.outputs puts finite saved states on the constraints (|q| = 1,
+    q·q̇ = 0), leaves non-finite slots as they are, and its derivative stays finite."""
+    from jrigid.formulations import QuaternionAcceleration
+    from jrigid.solve import Flat, ProjectedSolver
+    from jrigid.solvers import FusedTsit5
+
+    formulation = QuaternionAcceleration()
+    scene = free_scene()
+    y0 = formulation.from_state(scene, initial.from_omega(Q0, OMEGA0))
+    flat = Flat.of(formulation, y0)
+    solver = ProjectedSolver(FusedTsit5(), flat, None)
+    y0_flat = flat.ravel(y0)
+    ys = jnp.stack([1.1 * y0_flat + 0.01, jnp.full_like(y0_flat, jnp.inf),
+                    jnp.full_like(y0_flat, jnp.nan)])
+    out = solver.outputs(ys, scene, y0_flat)
+    q, qd = out[0, :4], out[0, 4:]
+    np.testing.assert_allclose(jnp.dot(q, q), 1.0, rtol=1e-14)
+    np.testing.assert_allclose(jnp.dot(q, qd), 0.0, atol=1e-14)
+    assert bool(jnp.all(jnp.isinf(out[1]))) and bool(jnp.all(jnp.isnan(out[2])))
+    def loss(scale):
+        # the unfilled slot depends on it with derivative 0, as diffrax's padding does
+        scaled = ys.at[0].multiply(scale).at[1].add(0.0 * scale)
+        projected = solver.outputs(scaled, scene, y0_flat)
+        return jnp.sum(jnp.where(jnp.isfinite(projected), projected, 0.0))
+
+    assert np.isfinite(float(jax.grad(loss)(1.0)))

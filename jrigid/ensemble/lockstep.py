@@ -128,11 +128,12 @@ def _solve(scene, states, ts, rtol, atol, dt0, formulation, solver, adjoint, max
             invariants = _over_members(
                 lambda sc, s: Invariants.of(sc, s.q, s.omega), scene_axis
             )(scene, states)
-        solver, saveat = projected(solver, batched, invariants, saveat)
+        solver = projected(solver, batched, invariants)
     sol = run(batched, solver, ts, dt0, y0, scene, saveat=saveat,
               stepsize_controller=controller(ts, rtol, atol, norm=_max_member_rms),
               adjoint=adjoint, max_steps=max_steps)
-    ys = jax.tree_util.tree_map(lambda a: jnp.moveaxis(a, 1, 0), sol.ys)  # (N, T + 1, ...)
+    ys = solver.outputs(sol.ys, scene, y0) if project else sol.ys
+    ys = jax.tree_util.tree_map(lambda a: jnp.moveaxis(a, 1, 0), ys)  # (N, T + 1, ...)
 
     def one(sc, y, bad):
         return finish(sc, formulation, ts, sol.ts, y, sol.result, sol.stats, invalid=bad)
