@@ -149,3 +149,18 @@ def test_saved_outputs_are_projected_and_unfilled_slots_kept():
         return jnp.sum(jnp.where(jnp.isfinite(projected), projected, 0.0))
 
     assert np.isfinite(float(jax.grad(loss)(1.0)))
+
+
+def test_plain_inputs_are_converted_or_named():
+    """Python floats and lists are accepted as tolerances and times (converted without an
+    XLA dispatch) and give the same solve as arrays; a non-numeric one is named."""
+    state = initial.from_omega(Q0, OMEGA0)
+    as_arrays = simulate(free_scene(), state, jnp.array([0.0, 0.5, 1.0]),
+                         rtol=jnp.asarray(1e-7), atol=jnp.asarray(1e-9))
+    as_python = simulate(free_scene(), state, [0.0, 0.5, 1.0], rtol=1e-7, atol=1e-9)
+    np.testing.assert_array_equal(as_python.q, as_arrays.q)
+    for bad in ({"rtol": "tight"}, {"atol": [1e-9, "x"]}):
+        with pytest.raises(ValueError, match=f"{next(iter(bad))} must be numeric"):
+            simulate(free_scene(), state, [0.0, 1.0], **bad)
+    with pytest.raises(ValueError, match="ts must be numeric"):
+        simulate(free_scene(), state, ["start", "end"])
