@@ -19,6 +19,7 @@ import numpy as np
 from jrigid._checks import is_traced
 from jrigid.formulations import AbstractFormulation
 from jrigid.invariants import Invariants
+from jrigid.solve.flat import Flat
 from jrigid.solvers import FusedTsit5
 
 __all__ = [
@@ -50,14 +51,14 @@ class ProjectedSolver(diffrax.AbstractWrappedSolver):
 
     Attributes:
         solver: the wrapped diffrax solver (any; ``isinstance`` checks see through it).
-        formulation: the formulation whose
-            :meth:`~jrigid.formulations.AbstractFormulation.project` is applied.
+        formulation: the formulation (or its flat form, :class:`~jrigid.solve.Flat`)
+            whose :meth:`~jrigid.formulations.AbstractFormulation.project` is applied.
         invariants: the values to restore (:class:`~jrigid.invariants.Invariants`), or
             ``None`` for the constraint manifold only.
     """
 
     solver: diffrax.AbstractSolver
-    formulation: AbstractFormulation = eqx.field(static=True)
+    formulation: AbstractFormulation | Flat = eqx.field(static=True)
     invariants: Invariants | None = None
 
     @property
@@ -115,10 +116,12 @@ class ProjectedSolver(diffrax.AbstractWrappedSolver):
 
         Outputs between steps are interpolated, so they are projected after the solve,
         all at once. (Projecting them in diffrax's ``SaveAt`` function instead compiles
-        the projection into the loop a second time: about 1 s more compile for the
-        default solve.) Slots that are not finite (unfilled after a failure, or a
-        diverged state) are returned unchanged; ``y0`` stands in for them inside the
-        projection, so that its derivative stays finite.
+        the projection into the loop a second time: it made the default free-rotor
+        program a third larger, 18.6k against 13.8k lines of optimised HLO.) Slots that
+        are not finite (unfilled after a failure, or a diverged state) are returned
+        unchanged; ``y0`` stands in for them inside the projection, so that its derivative
+        stays finite. A batched formulation's slot counts as one: any non-finite member
+        leaves it unprojected.
         """
 
         def one(y):
