@@ -202,12 +202,13 @@ def _solve_body(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoint,
         solver = projected(solver, flat, invariants)
     if stepsize_controller is None:
         stepsize_controller = controller(ts, rtol, atol)
-    sol = run(flat, solver, ts, dt0, flat.ravel(y0), scene, saveat=saveat,
+    y0_flat = flat.ravel(y0)
+    sol = run(flat, solver, ts, dt0, y0_flat, scene, saveat=saveat,
               stepsize_controller=stepsize_controller, adjoint=adjoint, max_steps=max_steps,
               event=flat.event(formulation.event() if event is None else event))
     ys = sol.ys
     if isinstance(solver, ProjectedSolver):
-        ys = solver.outputs(ys, scene, flat.ravel(y0))
+        ys = solver.outputs(ys, scene, y0_flat)
     ys = flat.states(ys)
     interpolation = flat.interpolation(sol.interpolation) if (dense or saveat.dense) else None
     if user_saveat:
