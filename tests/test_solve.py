@@ -89,6 +89,9 @@ def test_flat_layout_round_trips_and_evaluates_the_formulation(name):
     np.testing.assert_array_equal(jax.tree_util.tree_leaves(states)[0][1],
                                   2 * jax.tree_util.tree_leaves(y)[0])
     assert Flat.of(formulation, y) == flat  # static layout: equal across traces
+    for wrong in (y_flat[:-1], jnp.stack([y_flat, y_flat])):
+        with pytest.raises(ValueError, match=f"has shape \\({n},\\), got"):
+            flat.unravel(wrong)
 
 
 def test_user_event_sees_the_formulation_state():

@@ -57,8 +57,21 @@ class Flat(eqx.Module):
         leaves = jax.tree_util.tree_leaves(y)
         return jnp.concatenate([jnp.ravel(a) for a in leaves])
 
+    @property
+    def size(self) -> int:
+        """``n``, the length of the flat state."""
+        return sum(math.prod(shape) for shape in self.shapes)
+
     def unravel(self, flat: jax.Array):
-        """One state of the formulation's variables from ``flat (n,)``."""
+        """One state of the formulation's variables from ``flat (n,)``.
+
+        Raises:
+            ValueError: ``flat`` is not of shape ``(n,)``.
+        """
+        if jnp.shape(flat) != (self.size,):
+            raise ValueError(
+                f"a flat state of this layout has shape ({self.size},), got {jnp.shape(flat)}"
+            )
         leaves, start = [], 0
         for shape in self.shapes:
             size = math.prod(shape)
