@@ -1,9 +1,11 @@
 """Adaptive integration of a scene with diffrax: :func:`simulate`.
 
 One entry point, :func:`simulate`, over :func:`diffrax.diffeqsolve`. The default is
-Euler's equations in quaternion-acceleration form (17.50) with diffrax's Tsitouras 5(4)
-pair (``diffrax.Tsit5``, on the state raveled into one array) under a PID controller,
-and after every step
+Euler's equations in quaternion-acceleration form (17.50) with Hairer's DOP853 pair on
+diffrax's Runge–Kutta step (:class:`jrigid.solvers.TightDop853`: its error estimate
+scaled by 10, so that the tolerances bound the error of the result over long runs, and
+an accurate 7th-order dense output), on the state raveled into one array, under a PID
+controller, and after every step
 the state is projected back onto ``|q| = 1``, ``q·q̇ = 0`` and onto the invariants the
 scene conserves (energy and ``|L|`` for a torque-free body; energy, the vertical and —
 for a symmetric top — the axial angular momentum on a pivot under gravity): see
@@ -276,7 +278,7 @@ def simulate(
             ``"body_omega"``, ``"euler_angles"``) or a formulation object (e.g.
             ``QuaternionAcceleration(stabilization=1.0)``).
         solver: any diffrax solver; default :data:`jrigid.solve.DEFAULT_SOLVER`
-            (``diffrax.Tsit5``). Fixed-step solvers (``diffrax.Euler``,
+            (:class:`jrigid.solvers.TightDop853`). Fixed-step solvers (``diffrax.Euler``,
             ``diffrax.Heun``, ...) need ``stepsize_controller=diffrax.ConstantStepSize()``
             and ``dt0``. Or ``"exact"``: the closed-form motion (:mod:`jrigid.closed_form`)
             for torque-free scenes; then ``rtol``, ``atol``, ``max_steps``, ``dt0``,

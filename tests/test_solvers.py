@@ -1,4 +1,5 @@
-"""jrigid.solvers: the fused Runge–Kutta pairs against diffrax's own and against theory."""
+"""jrigid.solvers: the fused Runge–Kutta pairs and TightDop853 against diffrax's own,
+scipy's DOP853 and theory."""
 
 import diffrax
 import jax
@@ -8,10 +9,10 @@ import pytest
 from scipy.integrate import DOP853, solve_ivp
 from scipy.stats import linregress
 
-from jrigid.solvers import FusedDop853, FusedDopri8, FusedTsit5
+from jrigid.solvers import FusedDop853, FusedDopri8, FusedTsit5, TightDop853
 
 PAIRS = [(FusedTsit5, diffrax.Tsit5, 5), (FusedDopri8, diffrax.Dopri8, 8)]
-ORDERS = [(FusedTsit5, 5), (FusedDopri8, 8), (FusedDop853, 8)]
+ORDERS = [(FusedTsit5, 5), (FusedDopri8, 8), (FusedDop853, 8), (TightDop853, 8)]
 
 
 def kepler(t, y, args):
@@ -100,9 +101,12 @@ def _flat_kepler(t, y, args):
     return jnp.concatenate([y[2:], -y[:2] / jnp.sum(y[:2] ** 2) ** 1.5])
 
 
-def test_dop853_step_error_and_dense_output_are_scipys():
-    # One step of h = 0.4 from the Kepler state: the fused solver's y1, error estimate and
-    # dense output against scipy's DOP853 taking the same step (huge tolerances: accepted).
+@pytest.mark.parametrize("solver, factor", [(FusedDop853(), 1.0), (TightDop853(factor=1.0), 1.0),
+                                            (TightDop853(), 10.0)])
+def test_dop853_step_error_and_dense_output_are_scipys(solver, factor):
+    # One step of h = 0.4 from the Kepler state: the solver's y1, error estimate (times
+    # TightDop853's factor) and dense output against scipy's DOP853 taking the same step
+    # (huge tolerances: accepted).
     y0 = np.concatenate([np.asarray(Y0["x"]), np.asarray(Y0["v"])])
     h = 0.4
     ref = DOP853(lambda t, y: np.asarray(_flat_kepler(t, jnp.asarray(y), None)), 0.0, y0, h,
@@ -110,19 +114,32 @@ def test_dop853_step_error_and_dense_output_are_scipys():
     ref.step()
     assert ref.t == h
     dense = ref.dense_output()
-    solver = FusedDop853()
     term = diffrax.ODETerm(_flat_kepler)
     y0j = jnp.asarray(y0)
     state = solver.init(term, 0.0, h, y0j, None)
     y1, err, info, _, _ = solver.step(term, 0.0, h, y0j, None, state, False)
     np.testing.assert_allclose(y1, ref.y, rtol=0, atol=1e-14)
-    np.testing.assert_allclose(err, ref._estimate_error(ref.K, h), rtol=1e-9, atol=1e-17)
+    np.testing.assert_allclose(err, factor * ref._estimate_error(ref.K, h), rtol=1e-9,
+                               atol=1e-17)
     interp = solver.interpolation_cls(t0=0.0, t1=h, **info)
     for t in np.linspace(0.0, h, 9):
         np.testing.assert_allclose(interp.evaluate(t), dense(t), rtol=0, atol=1e-14)
 
 
-def test_dop853_dense_output_as_accurate_inside_steps_as_at_their_ends():
+def test_tight_dop853_takes_the_steps_of_dop853_at_tolerances_divided_by_its_factor():
+    tight = solve(TightDop853())
+    fused = solve(FusedDop853(), stepsize_controller=diffrax.PIDController(rtol=1e-10,
+                                                                            atol=1e-12))
+    plain = solve(FusedDop853())
+    assert int(tight.stats["num_steps"]) == int(fused.stats["num_steps"])
+    assert int(tight.stats["num_steps"]) > int(plain.stats["num_steps"])
+    for key in ("x", "v"):
+        np.testing.assert_allclose(tight.ys[key], fused.ys[key], rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("solver", [FusedDop853, lambda: TightDop853(factor=1.0)],
+                         ids=["fused", "tight"])
+def test_dop853_dense_output_as_accurate_inside_steps_as_at_their_ends(solver):
     # Adaptive solve at rtol 1e-10: the worst error at 301 output times (mostly inside
     # steps) within 4x the worst error at the step ends (Dormand-Prince 8(7)'s interpolant,
     # measured: over 10x), against scipy's DOP853 at rtol 1e-13.
@@ -142,8 +159,8 @@ def test_dop853_dense_output_as_accurate_inside_steps_as_at_their_ends():
         keep = np.isfinite(ts)
         return np.abs(np.asarray(sol.ys)[keep] - ref.sol(ts[keep]).T).max()
 
-    inside = errors(FusedDop853(), diffrax.SaveAt(ts=jnp.linspace(0.0, 6.0, 301)))
-    ends = errors(FusedDop853(), diffrax.SaveAt(steps=True))
+    inside = errors(solver(), diffrax.SaveAt(ts=jnp.linspace(0.0, 6.0, 301)))
+    ends = errors(solver(), diffrax.SaveAt(steps=True))
     assert inside < 4 * ends, (inside, ends)
     inside8 = errors(FusedDopri8(), diffrax.SaveAt(ts=jnp.linspace(0.0, 6.0, 301)))
     ends8 = errors(FusedDopri8(), diffrax.SaveAt(steps=True))

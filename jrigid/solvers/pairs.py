@@ -169,8 +169,13 @@ class FusedDop853(FusedRungeKutta):
 
     def error_estimate(self, h, stages):
         e5 = super().error_estimate(h, stages)
-        e3 = _combination(None, h, _dop853.E3, stages)
-        d2 = e5 * e5 + 0.01 * (e3 * e3)
-        positive = d2 > 0
-        scale = jnp.where(positive, jnp.abs(e5) / jnp.sqrt(jnp.where(positive, d2, 1.0)), 1.0)
-        return e5 * scale
+        return _dop853_error(e5, _combination(None, h, _dop853.E3, stages))
+
+
+def _dop853_error(e5, e3):
+    """DOP853's error estimate from its 5th- and 3rd-order ones, per component:
+    ``e5 |e5| / √(e5² + 0.01 e3²)`` (``e5`` where both vanish)."""
+    d2 = e5 * e5 + 0.01 * (e3 * e3)
+    positive = d2 > 0
+    scale = jnp.where(positive, jnp.abs(e5) / jnp.sqrt(jnp.where(positive, d2, 1.0)), 1.0)
+    return e5 * scale
