@@ -311,7 +311,7 @@ def main(
     rep = Report(Path(out_dir), title="jrigid demo: a wobbling plate and a flipping T-handle")
     rep.text(
         f"Made by `jrigid demo{' --quick' if quick else ''}`. Both bodies are torque free, "
-        "integrated by `jrigid.simulate` (quaternion acceleration, Tsit5, rtol 1e-10) in "
+        "integrated by `jrigid.simulate` (quaternion acceleration, DOP853, rtol 1e-10) in "
         f"{dtype}; largest relative energy drift {drift:.1e}."
     )
     _plate_section(rep, p, radius, thickness, spin_hz, frames, fps, gif)

@@ -82,7 +82,7 @@ def ftle_simulate(
         omega0: ``(3,)`` initial body angular velocity.
         t: ``()`` horizon ``> 0``.
         rtol, atol: tolerances of the solve.
-        solver: diffrax solver (default ``Tsit5``).
+        solver: diffrax solver (default: :func:`jrigid.simulate`'s).
         max_steps: step budget.
         formulation: static, :func:`jrigid.simulate`'s formulation; the default
             ``"body_omega"`` integrates Euler's equations alone (ω needs no orientation).

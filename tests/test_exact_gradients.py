@@ -111,7 +111,11 @@ def test_jacobians_match_forward_mode_diffrax(jacobians, name):
     # Near a sphere the reference's own derivatives carry about eps/δ per step (the
     # invariant projection's energy-like residual over a gradient of size δ; see
     # jrigid.invariants): up to 2e-10 at δ = 1e-6, 7e-8 at δ = 1e-9 (t = 5).
-    tol = 1e-6 if name.startswith("near_sphere") else 1e-11
+    # At a spin about a principal axis the motion is steady, so the step-size control (on
+    # the state only, not on its derivatives) lets the default eighth-order pair take long
+    # steps, and the reference's derivatives carry 1e-11-2.3e-11 at t = 2 and 5 (measured;
+    # under 1e-12 with the Tsitouras 5(4) pair).
+    tol = 1e-6 if name.startswith("near_sphere") else 5e-11 if name.startswith("spin") else 1e-11
     for k in range(len(TS)):
         scale = max(1.0, np.abs(ref[k]).max())
         assert np.abs(fwd[k] - ref[k]).max() <= tol * scale, (TS[k], fwd[k] - ref[k])
