@@ -182,3 +182,9 @@ def test_jump_recomputes_first_stage():
     a = solve(FusedTsit5(), stepsize_controller=ctrl)
     b = solve(diffrax.Tsit5(), stepsize_controller=ctrl)
     np.testing.assert_allclose(a.ys["x"], b.ys["x"], atol=1e-11)
+
+
+@pytest.mark.parametrize("factor", [0.0, -1.0, float("nan"), True, "10"])
+def test_tight_dop853_refuses_a_factor_that_is_not_a_positive_number(factor):
+    with pytest.raises(ValueError, match="factor must be a number > 0"):
+        TightDop853(factor=factor)

@@ -35,9 +35,9 @@ __all__ = [
 #: The solver of :func:`jrigid.simulate` and the other integrators when none is given
 #: (a class, instantiated per call): DOP853 on diffrax's generic step, its error
 #: estimate scaled by 10 (:class:`jrigid.solvers.TightDop853`). Measured against the
-#: Tsitouras 5(4) pair on the same form (``benchmarks/speed_vs_error.py``): 1.2–3.5×
-#: faster from rtol 1e-6 to 1e-10 and more accurate per tolerance everywhere; slower
-#: per call at rtol 1e-4, where it is also 30–500× more accurate.
+#: Tsitouras 5(4) pair on the same form (``benchmarks/speed_vs_error.py``, free rotors
+#: and a heavy top): 0.98–3.1× as fast at equal error from 1e-6 to 1e-10 (0.69–1.6× at
+#: 1e-4), and more accurate per tolerance (final error 0.04–12·rtol against 0.2–70·rtol).
 DEFAULT_SOLVER = TightDop853
 
 

@@ -34,8 +34,8 @@ class TightDop853(diffrax.AbstractERK):
     An 8th-order step of 12 stages and the first-same-as-last one; the error estimate
     combines a 5th- and a 3rd-order one as DOP853 does; three more stages per step give
     its 7th-order dense output, so that output times inside a step are about as accurate
-    as the step ends (where Dormand–Prince 8(7)'s interpolant, ``diffrax.Dopri8``, was
-    6–60× less accurate than its steps on free rotors).
+    as the step ends (Dormand–Prince 8(7)'s interpolant, ``diffrax.Dopri8``'s, measured
+    6–16·rtol inside steps against 0.1–0.3·rtol at step ends on free rotors).
 
     Scaling the estimate by ``factor`` is the same as running the step-size controller
     at ``rtol / factor`` and ``atol / factor``: with it the tolerances bound the error of
@@ -53,6 +53,11 @@ class TightDop853(diffrax.AbstractERK):
     tableau: ClassVar[diffrax.ButcherTableau] = _dop853_tableau()
     interpolation_cls: ClassVar = _Dop853Increments
     factor: float = 10.0
+
+    def __check_init__(self):
+        ok = isinstance(self.factor, (int, float)) and not isinstance(self.factor, bool)
+        if not (ok and self.factor > 0):
+            raise ValueError(f"TightDop853 factor must be a number > 0, got {self.factor!r}")
 
     def order(self, terms):
         return 8
