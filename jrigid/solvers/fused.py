@@ -123,14 +123,11 @@ class FusedRungeKutta(diffrax.AbstractAdaptiveSolver):
             return ravel_pytree(terms.vf(t, unravel(flat), args))[0].astype(flat.dtype)
 
         h = t1 - t0
-        if made_jump is False:  # diffrax resolved it statically: no jumps in this solve
-            f0 = solver_state  # (a cond would compile one more field evaluation)
-        else:
-            f0 = jax.lax.cond(
-                eqxi.unvmap_any(made_jump),
-                lambda: field(t0, flat0),
-                lambda: solver_state,
-            )
+        f0 = jax.lax.cond(
+            eqxi.unvmap_any(made_jump),
+            lambda: field(t0, flat0),
+            lambda: solver_state,
+        )
         stages = [f0]
         # First-same-as-last: the last row's stage is evaluated at (t1, y1).
         flat1 = _append_stages(field, t0, t1, flat0, stages, tab.a_lower, tab.c)

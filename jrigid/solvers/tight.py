@@ -10,7 +10,7 @@ import jax
 import jax.numpy as jnp
 from scipy.integrate._ivp import dop853_coefficients as _dop853
 
-from jrigid.solvers.pairs import _dop853_error, _dop853_tableau, _Dop853Dense
+from jrigid.solvers.pairs import FusedDop853, _dop853_error, _dop853_tableau, _Dop853Dense
 
 __all__ = ["TightDop853"]
 
@@ -70,9 +70,8 @@ class TightDop853(diffrax.AbstractERK):
         e3 = jax.tree_util.tree_map(lambda a: _tensordot(_dop853.E3, a), k)
         y_error = jax.tree_util.tree_map(lambda a, b: self.factor * _dop853_error(a, b), e5, e3)
         control = terms.contr(t0, t1)
-        for i in range(_dop853.N_STAGES + 1, _dop853.N_STAGES_EXTENDED):
-            row = _dop853.A[i, :i]
+        for row, c in FusedDop853.extra_stages:  # the dense output's three stages
             y_i = jax.tree_util.tree_map(lambda y, a, row=row: y + _tensordot(row, a), y0, k)
-            k_i = terms.vf_prod(t0 + float(_dop853.C[i]) * (t1 - t0), y_i, args, control)
+            k_i = terms.vf_prod(t0 + c * (t1 - t0), y_i, args, control)
             k = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b[None]]), k, k_i)
         return y1, y_error, dict(y0=y0, y1=y1, f=k), solver_state, result
