@@ -204,7 +204,7 @@ def _solve_body(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoint,
         invariants = Invariants.of(scene, state.q, state.omega) if restore else None
         solver = projected(solver, flat, invariants)
     if stepsize_controller is None:
-        stepsize_controller = controller(ts, rtol, atol)
+        stepsize_controller = controller(ts, rtol, atol, layout=flat)
     y0_flat = flat.ravel(y0)
     sol = run(flat, solver, ts, dt0, y0_flat, scene, saveat=saveat,
               stepsize_controller=stepsize_controller, adjoint=adjoint, max_steps=max_steps,

@@ -25,7 +25,24 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-__all__ = ["Flat"]
+__all__ = ["Flat", "vector_lengths"]
+
+
+def vector_lengths(y):
+    """Each vector of a state replaced by its Euclidean length, entry by entry.
+
+    Every leaf of ``y`` is taken as vectors along its last axis (``(4,)``, or ``(N, 4)``
+    for a batch): the result has the leaves' shapes, each entry the length of its
+    vector. A scalar leaf gives its absolute value.
+    """
+
+    def one(a):
+        a = jnp.asarray(a)
+        if a.ndim == 0:
+            return jnp.abs(a)
+        return jnp.broadcast_to(jnp.sqrt(jnp.sum(a * a, axis=-1, keepdims=True)), a.shape)
+
+    return jax.tree_util.tree_map(one, y)
 
 
 class Flat(eqx.Module):
@@ -86,6 +103,11 @@ class Flat(eqx.Module):
     def vector_field(self, t, y, scene) -> jax.Array:
         """``d ravel(y)/dt``: the formulation's vector field on the flat state."""
         return self.ravel(self.formulation.vector_field(t, self.unravel(y), scene))
+
+    def lengths(self, y) -> jax.Array:
+        """``(n,)`` each entry of ``y`` replaced by the length of its leaf's vector
+        (:func:`vector_lengths` of the formulation's variables)."""
+        return self.ravel(vector_lengths(self.unravel(y)))
 
     def project(self, y, scene, invariants=None) -> jax.Array:
         """The formulation's projection on the flat state."""

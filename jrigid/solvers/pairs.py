@@ -173,9 +173,22 @@ class FusedDop853(FusedRungeKutta):
 
 
 def _dop853_error(e5, e3):
-    """DOP853's error estimate from its 5th- and 3rd-order ones, per component:
-    ``e5 |e5| / √(e5² + 0.01 e3²)`` (``e5`` where both vanish)."""
-    d2 = e5 * e5 + 0.01 * (e3 * e3)
+    """DOP853's error estimate from its 5th- and 3rd-order ones: ``ρ e5`` with
+    ``ρ = |e5| / √(|e5|² + 0.01 |e3|²)`` (1 where both vanish), ``|·|`` the Euclidean norm
+    of the whole state (of each member, for a state whose leaves carry a batch axis first).
+
+    This is the estimate scipy's (and Hairer's) DOP853 controls steps with,
+    ``|e5|² / √(|e5|² + 0.01 |e3|²)``, taken on the unscaled state so that the controller
+    can scale it: a rotation of the frame (an orthogonal map of the state) rotates the
+    estimate with it. (A component-by-component ``ρ`` would not.)
+    """
+
+    def squares(leaves):
+        return sum(a * a if jnp.ndim(a) == 0 else jnp.sum(a * a, axis=-1, keepdims=True)
+                   for a in leaves)
+
+    n5 = squares(jax.tree_util.tree_leaves(e5))
+    d2 = n5 + 0.01 * squares(jax.tree_util.tree_leaves(e3))
     positive = d2 > 0
-    scale = jnp.where(positive, jnp.abs(e5) / jnp.sqrt(jnp.where(positive, d2, 1.0)), 1.0)
-    return e5 * scale
+    rho = jnp.where(positive, jnp.sqrt(n5 / jnp.where(positive, d2, 1.0)), 1.0)
+    return jax.tree_util.tree_map(lambda a: a * rho, e5)

@@ -68,7 +68,7 @@ class TightDop853(diffrax.AbstractERK):
         )
         k = dense_info["k"]  # the 13 stage increments h f(tᵢ, yᵢ), leading axis
         e3 = jax.tree_util.tree_map(lambda a: _tensordot(_dop853.E3, a), k)
-        y_error = jax.tree_util.tree_map(lambda a, b: self.factor * _dop853_error(a, b), e5, e3)
+        y_error = jax.tree_util.tree_map(lambda a: self.factor * a, _dop853_error(e5, e3))
         control = terms.contr(t0, t1)
         for row, c in FusedDop853.extra_stages:  # the dense output's three stages
             y_i = jax.tree_util.tree_map(lambda y, a, row=row: y + _tensordot(row, a), y0, k)
