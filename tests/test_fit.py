@@ -317,6 +317,27 @@ def test_lbfgs_line_search_backs_off_where_the_loss_is_not_finite():
     assert np.all(np.isfinite(res.history["loss"]))
 
 
+def test_lbfgs_line_search_shortens_its_first_step_into_a_narrow_valley(monkeypatch):
+    """An ill-conditioned loss (curvatures 1 and 1e10) from a start whose steepest-descent
+    minimum lies ~1e-6 along the unit direction optax's first L-BFGS step takes, 20
+    halvings below the first trial step, beyond the search's 21 trials: the search is
+    repeated from the minimum of a quadratic through its shortest trial, and the fit
+    converges. Without the repeat it stalls at the start (as a tumbling-body fit did)."""
+    from jrigid.fit import steps
+
+    def valley(p):
+        x = p["x"]
+        return 0.5 * (x[0] ** 2 + 1e10 * x[1] ** 2)
+
+    start = {"x": jnp.array([1.0, 1e-6])}
+    res = fit.fit(valley, start, gtol=1e-9, max_iter=200)
+    assert res.success, res.message
+    np.testing.assert_allclose(res.params["x"], [0.0, 0.0], atol=1e-8)
+    monkeypatch.setattr(steps, "_RESCALES", 0)
+    res = fit.fit(valley, start, gtol=1e-9, max_iter=200, on_bad_fit="ignore")
+    assert not res.success and res.reason == "stalled" and res.n_iter <= 1
+
+
 def test_driver_progress_bar(capsys):
     res = fit.fit(_quadratic, {"x": jnp.zeros(3)}, max_iter=100, progress=True)
     assert res.converged

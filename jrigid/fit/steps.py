@@ -27,8 +27,12 @@ minimum: a search that fails there ends the fit by the ``ftol`` rule (below).
 A trial point whose loss or gradient is not finite (a failed integration) counts as
 ``f = inf``, so the search backs off. When the search fails, the trial with the lowest
 loss among those with sufficient decrease is taken (optax's "safe" step). When there is
-none, the step stops with ``stalled`` set — and the driver with ``"ftol"`` — if the
-decrease the quasi-Newton model promised, ``−½ ∇f·d``, is negligible: below
+none because even the shortest trial overshot a narrow valley (an ill-conditioned loss:
+measured on a tumbling body near its intermediate axis, the minimum along steepest
+descent lay 20 halvings below the first trial step), the search is repeated from the
+minimum of a quadratic fitted to that trial, up to three times. When that fails too,
+the step stops with ``stalled`` set — and the driver with ``"ftol"`` — if the decrease
+the quasi-Newton model promised, ``−½ ∇f·d``, is negligible: below
 ``max(ftol, eps) · max(1, |f|)``, or below the loss's noise seen by the search (the loss
 rose at the shortest trial step by more than the promise, and by about as much at the
 longest: a loss computed by an adaptive ODE solver changes by about its tolerance
@@ -177,27 +181,56 @@ def _line_search(f, unravel, flat, d, f0, g0):
     scipy's ``line_search`` (Nocedal & Wright's Algorithms 3.5 and 3.6, which optax's
     zoom line search ports) from step 1 (optax's ``initial_guess_strategy="one"``), at
     most 10 bracketing and 11 zoom trials. When it fails, the trial with the lowest value
-    among those with sufficient decrease is taken (optax's "safe" step); ``None`` when no
-    trial decreased the loss sufficiently.
+    among those with sufficient decrease is taken (optax's "safe" step). When there is
+    none because even the shortest trial step overshot a narrow valley (the loss rose
+    there, smoothly: :func:`_shorter_step`), the search is repeated from the minimum of
+    the quadratic through ``f0``, the slope at 0 and that trial, at most
+    :data:`_RESCALES` times; ``None`` when no trial decreased the loss sufficiently.
     """
     x0 = np.asarray(flat, dtype=float)
     trials = _Trials(f, unravel, flat.dtype, x0, d)
-    with warnings.catch_warnings():
-        # a failed search warns (scipy's LineSearchWarning, a RuntimeWarning): handled below
-        warnings.simplefilter("ignore", RuntimeWarning)
-        alpha, *_, new_slope = line_search(
-            lambda x: trials(x)[0], lambda x: trials(x)[1], x0, d, gfk=g0, old_fval=f0,
-            c1=_C1, c2=_C2,
-        )  # fmt: skip
-    if alpha is not None and new_slope is not None:
-        _, _, _, p, value, grad = trials(x0 + alpha * d)
-        return (p, value, grad), trials
     slope0 = float(g0 @ d)
-    safe = [t for t in trials.points.values() if t[0] <= f0 + _C1 * t[2] * slope0 and t[2] > 0]
-    if not safe:
-        return None, trials
-    _, _, _, p, value, grad = min(safe, key=lambda t: t[0])
-    return (p, value, grad), trials
+    scale = 1.0
+    for _ in range(_RESCALES + 1):
+        with warnings.catch_warnings():
+            # a failed search warns (scipy's LineSearchWarning, a RuntimeWarning): handled
+            warnings.simplefilter("ignore", RuntimeWarning)
+            alpha, *_, new_slope = line_search(
+                lambda x: trials(x)[0], lambda x: trials(x)[1], x0, scale * d, gfk=g0,
+                old_fval=f0, c1=_C1, c2=_C2,
+            )  # fmt: skip
+        if alpha is not None and new_slope is not None:
+            _, _, _, p, value, grad = trials(x0 + alpha * scale * d)
+            return (p, value, grad), trials
+        safe = [t for t in trials.points.values()
+                if t[0] <= f0 + _C1 * t[2] * slope0 and t[2] > 0]  # fmt: skip
+        if safe:
+            _, _, _, p, value, grad = min(safe, key=lambda t: t[0])
+            return (p, value, grad), trials
+        scale = _shorter_step(trials, f0, slope0)
+        if scale is None:
+            break
+    return None, trials
+
+
+#: How many times a failed line search is repeated from a shorter first step.
+_RESCALES = 3
+
+
+def _shorter_step(trials, f0, slope0) -> float | None:
+    """The first step of a repeated search after one whose every trial overshot: the
+    minimum ``α_q = −φ'(0) α² / (2 (φ(α) − φ(0) − φ'(0) α))`` of the quadratic through the
+    shortest trial ``α`` (at most ``α / 10``); ``None`` when that trial did not rise by
+    more than the linear decrease it was promised (a loss flat to its noise, or not
+    finite, which a shorter step does not cure) or the search already saw noise."""
+    finite = [(t[2], t[0]) for t in trials.points.values() if t[2] > 0 and np.isfinite(t[0])]
+    if not finite or _noise(trials, f0) > 0:
+        return None
+    alpha, value = min(finite)
+    rise = value - f0
+    if not rise > -slope0 * alpha:
+        return None
+    return min(-slope0 * alpha**2 / (2 * (rise - slope0 * alpha)), 0.1 * alpha)
 
 
 def _noise(trials, f0) -> float:
