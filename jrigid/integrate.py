@@ -63,6 +63,7 @@ from jrigid.solve.stepping import (  # DEFAULT_SOLVER: also named here
     DEFAULT_SOLVER,  # noqa: F401
     ProjectedSolver,
     controller,
+    interpolating_at,
     projected,
     run,
     solver_options,
@@ -199,6 +200,8 @@ def _solve_body(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoint,
     user_saveat = saveat is not None
     if saveat is None:
         saveat = diffrax.SaveAt(ts=ts, t1=True, dense=dense)
+    if not (user_saveat or dense or event is not None or formulation.event() is not None):
+        solver = interpolating_at(solver, ts)
     manifold, restore = project
     if manifold and formulation.carries_quaternion:
         invariants = Invariants.of(scene, state.q, state.omega) if restore else None

@@ -197,3 +197,35 @@ def test_jump_recomputes_first_stage():
 def test_tight_dop853_refuses_a_factor_that_is_not_a_positive_number(factor):
     with pytest.raises(ValueError, match="factor must be a number > 0"):
         TightDop853(factor=factor)
+
+
+def test_dense_stages_only_where_an_output_time_falls():
+    """``at_outputs(ts)``: a step holding an output time in ``(t0, t1]`` has the dense
+    output's stages of the eager solver; a step without one leaves them zero (and the
+    interpolation still starts at ``y0``); a whole solve saving at ``ts`` is unchanged."""
+    term = diffrax.ODETerm(_flat_kepler)
+    y0 = jnp.concatenate([Y0["x"], Y0["v"]])
+    eager, lazy = TightDop853(), TightDop853().at_outputs(jnp.array([0.0, 0.5, 1.0]))
+    for (t0, t1), inside in (((0.0, 0.4), False), ((0.4, 0.5), True), ((0.5, 0.8), False),
+                             ((0.8, 1.2), True)):
+        state = eager.init(term, t0, t1, y0, None)
+        ref = eager.step(term, t0, t1, y0, None, state, False)
+        got = lazy.step(term, t0, t1, y0, None, state, False)
+        np.testing.assert_array_equal(got[0], ref[0])
+        np.testing.assert_array_equal(got[1], ref[1])
+        f_ref, f_got = ref[2]["f"], got[2]["f"]
+        assert f_ref.shape == f_got.shape == (16, 4)
+        np.testing.assert_array_equal(f_got[:13], f_ref[:13])
+        if inside:
+            np.testing.assert_array_equal(f_got, f_ref)
+        else:
+            assert np.all(f_got[13:] == 0) and np.all(f_ref[13:] != 0)
+            interp = lazy.interpolation_cls(t0=t0, t1=t1, **got[2])
+            np.testing.assert_array_equal(interp.evaluate(t0), y0)
+    ts = jnp.linspace(0.0, 3.0, 7)
+    for solver in (eager, TightDop853().at_outputs(ts)):
+        sol = diffrax.diffeqsolve(term, solver, 0.0, 3.0, None, y0, saveat=diffrax.SaveAt(ts=ts),
+                                  stepsize_controller=diffrax.PIDController(rtol=1e-9, atol=1e-9))
+        if solver is eager:
+            ref = sol.ys
+    np.testing.assert_array_equal(sol.ys, ref)

@@ -44,7 +44,7 @@ from jrigid.invariants import Invariants
 from jrigid.scene import Scene
 from jrigid.solve.inputs import input_checks, normalised, prepare, screen
 from jrigid.solve.outcome import finish, raise_on_failure
-from jrigid.solve.stepping import controller, projected, run, solver_options
+from jrigid.solve.stepping import controller, interpolating_at, projected, run, solver_options
 from jrigid.state import State
 from jrigid.trajectory import Trajectory
 
@@ -122,6 +122,7 @@ def _solve(scene, states, ts, rtol, atol, dt0, formulation, solver, adjoint, max
     y0 = _over_members(lambda sc, s: formulation.from_state(sc, s), scene_axis)(scene, states)
     batched = _Batched(formulation, scene_axis)
     saveat = diffrax.SaveAt(ts=ts, t1=True)
+    solver = interpolating_at(solver, ts)
     if project:
         invariants = None
         if scene.torque_free or scene.conservative_top:

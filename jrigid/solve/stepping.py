@@ -29,6 +29,7 @@ __all__ = [
     "ProjectedSolver",
     "VectorPIDController",
     "controller",
+    "interpolating_at",
     "projected",
     "run",
     "solver_options",
@@ -139,6 +140,14 @@ class ProjectedSolver(diffrax.AbstractWrappedSolver):
             return jax.tree_util.tree_map(lambda a, b: jnp.where(finite, a, b), done, y)
 
         return jax.vmap(one)(ys)
+
+
+def interpolating_at(solver, ts):
+    """``solver`` for a solve whose interpolation only saves at ``ts (T,)``: a
+    :class:`~jrigid.solvers.TightDop853` then computes its dense output's stages only in
+    steps that hold an output time (:meth:`~jrigid.solvers.TightDop853.at_outputs`);
+    any other solver is returned as it is."""
+    return solver.at_outputs(ts) if isinstance(solver, TightDop853) else solver
 
 
 def projected(solver, formulation, invariants) -> ProjectedSolver:

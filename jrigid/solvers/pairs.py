@@ -143,7 +143,8 @@ class FusedDop853(FusedRungeKutta):
     """Hairer's DOP853 with fused stages: the pair of scipy's ``solve_ivp(method="DOP853")``.
 
     An 8th-order step of 12 stages plus the first-same-as-last one; the error estimate
-    combines a 5th- and a 3rd-order one (``e5 |e5| / √(e5² + 0.01 e3²)`` per component);
+    combines a 5th- and a 3rd-order one as Hairer's does
+    (``ρ e5``, ``ρ = |e5| / √(|e5|² + 0.01 |e3|²)``);
     three more stages per step give its 7th-order dense output, so that output times
     inside a step are about as accurate as the step ends: 15 new evaluations of the
     vector field a step, where :class:`FusedDopri8` takes 13 and interpolates far worse.
