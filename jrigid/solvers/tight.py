@@ -104,22 +104,23 @@ class TightDop853(diffrax.AbstractERK):
 
 _EXTRA = len(FusedDop853.extra_stages)
 _STAGES = _dop853.N_STAGES + 1  # the stages of the step: 12 and the first-same-as-last
+# the dense output's stages: their rows of the tableau (zero-padded to all 16 stages), times
+_EXTRA_A = np.zeros((_EXTRA, _STAGES + _EXTRA))
+for _j, (_row, _) in enumerate(FusedDop853.extra_stages):
+    _EXTRA_A[_j, : len(_row)] = _row
+_EXTRA_C = np.array([c for _, c in FusedDop853.extra_stages])
 
 
 def _dense_stages(terms, t0, t1, y0, args, k):
     """``k (16, ...)`` with rows 13–15, the dense output's stages, filled in: one loop,
     so that the vector field is compiled once for them."""
-    rows = np.zeros((_EXTRA, _STAGES + _EXTRA))
-    for j, (row, _) in enumerate(FusedDop853.extra_stages):
-        rows[j, : len(row)] = row
-    cs = np.array([c for _, c in FusedDop853.extra_stages])
     control = terms.contr(t0, t1)
 
     def stage(j, k):
         y_j = jax.tree_util.tree_map(
-            lambda y, a: y + jnp.tensordot(jnp.asarray(rows, a.dtype)[j], a, axes=1), y0, k
+            lambda y, a: y + jnp.tensordot(jnp.asarray(_EXTRA_A, a.dtype)[j], a, axes=1), y0, k
         )
-        c = jnp.asarray(cs, jnp.result_type(t0, t1))[j]
+        c = jnp.asarray(_EXTRA_C, jnp.result_type(t0, t1))[j]
         k_j = terms.vf_prod(t0 + c * (t1 - t0), y_j, args, control)
         return jax.tree_util.tree_map(lambda a, b: a.at[_STAGES + j].set(b), k, k_j)
 
