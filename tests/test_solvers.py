@@ -229,3 +229,6 @@ def test_dense_stages_only_where_an_output_time_falls():
         if solver is eager:
             ref = sol.ys
     np.testing.assert_array_equal(sol.ys, ref)
+    for wrong in (jnp.array(1.0), jnp.ones((2, 3))):
+        with pytest.raises(ValueError, match="output times must have shape"):
+            TightDop853().at_outputs(wrong)

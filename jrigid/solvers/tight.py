@@ -75,8 +75,13 @@ class TightDop853(diffrax.AbstractERK):
         ``SaveAt(ts=ts)``, no dense output, no event): a step without an output time
         then evaluates the vector field 12 times instead of 15. Elsewhere its
         interpolation is not valid.
+
+        Raises:
+            ValueError: ``ts`` is not one-dimensional.
         """
-        return dataclasses.replace(self, output_ts=ts)
+        if jnp.ndim(ts) != 1:
+            raise ValueError(f"output times must have shape (T,), got {jnp.shape(ts)}")
+        return dataclasses.replace(self, output_ts=jnp.asarray(ts))
 
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
         y1, e5, dense_info, solver_state, result = super().step(
