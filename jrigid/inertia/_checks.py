@@ -57,7 +57,7 @@ def _conditions(inertia: jax.Array, kind: str, allow_nonphysical: bool, rtol):
         moments = jnp.linalg.eigvalsh(sym)
         pd = _positive_definite(sym)
     else:
-        moments = jnp.sort(clean, axis=-1)
+        moments = _sorted3(clean)
         pd = moments[..., 0] > 0  # exact: the moments are given
     lo, mid, hi = moments[..., 0], moments[..., 1], moments[..., 2]
     out.append(("not positive definite", ok & ~pd, "principal moments", moments))
@@ -73,6 +73,19 @@ def _conditions(inertia: jax.Array, kind: str, allow_nonphysical: bool, rtol):
             )
         )
     return out
+
+
+def _sorted3(m: jax.Array) -> jax.Array:
+    """``(..., 3)`` sorted along the last axis by ``min``/``max`` (exact, like ``jnp.sort``).
+
+    XLA:CPU runs a ``sort`` as a separate library call, and a loop or computation
+    holding one cannot be compiled into a single kernel; these are elementwise.
+    """
+    a, b, c = m[..., 0], m[..., 1], m[..., 2]
+    lo = jnp.minimum(jnp.minimum(a, b), c)
+    hi = jnp.maximum(jnp.maximum(a, b), c)
+    mid = jnp.maximum(jnp.minimum(a, b), jnp.minimum(jnp.maximum(a, b), c))
+    return jnp.stack([lo, mid, hi], axis=-1)
 
 
 def _positive_definite(sym: jax.Array) -> jax.Array:
