@@ -53,6 +53,7 @@ import jax.numpy as jnp
 from jax.typing import ArrayLike
 
 from jrigid import closed_form, splitting
+from jrigid._dispatch import one_kernel
 from jrigid.formulations import AbstractFormulation, check_scene, get_formulation
 from jrigid.invariants import Invariants
 from jrigid.scene import Scene
@@ -189,8 +190,36 @@ def _filter_solve(*args):
     return _solve_body(*args)
 
 
+def _final_only(ts, formulation, dense, saveat, event) -> bool:
+    """Whether a solve saves its two end points only, with nothing else asked of diffrax:
+    then it saves with ``SaveAt(t0=True, t1=True)`` and runs as one kernel
+    (:func:`jrigid._dispatch.one_kernel`; diffrax's checks of ``SaveAt(ts=...)`` are
+    runtime errors, which a kernel cannot hold)."""
+    return (ts.shape[0] == 2 and saveat is None and not dense and event is None
+            and formulation.event() is None)
+
+
 def _solve_body(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoint, max_steps,
                 project, dense, saveat, stepsize_controller, event):
+    final_only = _final_only(ts, formulation, dense, saveat, event)
+    messages = []
+
+    def solve(scene, state, ts, rtol, atol, dt0):
+        traj, cause, texts = _solve_arrays(
+            scene, state, ts, rtol, atol, dt0, formulation, solver, adjoint, max_steps,
+            project, dense, saveat, stepsize_controller, event, final_only,
+        )
+        messages[:] = texts
+        return traj, cause
+
+    if final_only:
+        solve = one_kernel(solve)
+    traj, cause = solve(scene, state, ts, rtol, atol, dt0)
+    return traj, cause, tuple(messages)
+
+
+def _solve_arrays(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoint, max_steps,
+                  project, dense, saveat, stepsize_controller, event, final_only):
     checks = input_checks(formulation, scene, state, ts, rtol, atol)
     messages = tuple(m for _, m in checks)
     invalid, cause, scene, state, ts, rtol, atol = screen(checks, scene, state, ts, rtol, atol)
@@ -198,9 +227,12 @@ def _solve_body(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoint,
     y0 = formulation.from_state(scene, state)
     flat = Flat.of(formulation, y0)  # one array in the loop: fewer operations per step
     user_saveat = saveat is not None
-    if saveat is None:
+    if final_only:
+        saveat = diffrax.SaveAt(t0=True, t1=True)
+    elif saveat is None:
         saveat = diffrax.SaveAt(ts=ts, t1=True, dense=dense)
-    if not (user_saveat or dense or event is not None or formulation.event() is not None):
+    if not (final_only or user_saveat or dense or event is not None
+            or formulation.event() is not None):
         solver = interpolating_at(solver, ts)
     manifold, restore = project
     if manifold and formulation.carries_quaternion:
@@ -220,7 +252,11 @@ def _solve_body(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoint,
     if user_saveat:
         traj = _finish_saved(scene, formulation, ts, sol, ys, interpolation, invalid, event)
     else:
-        traj = finish(scene, formulation, ts, sol.ts, ys, sol.result, sol.stats,
+        saved_ts = sol.ts
+        if final_only:  # (t0, t_end) → the layout of SaveAt(ts=ts, t1=True): (t0, t_end, t_end)
+            saved_ts = jnp.concatenate([saved_ts, saved_ts[-1:]])
+            ys = jax.tree_util.tree_map(lambda a: jnp.concatenate([a, a[-1:]]), ys)
+        traj = finish(scene, formulation, ts, saved_ts, ys, sol.result, sol.stats,
                       interpolation, invalid, user_event=event is not None)
     return traj, cause, messages
 

@@ -1,0 +1,145 @@
+"""A small solve on XLA:CPU's fast path (``jrigid._dispatch``): synchronous dispatch set on
+import, the whole final-state solve compiled into one kernel, and derivatives through it."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jrigid import initial, simulate
+from jrigid._dispatch import one_kernel
+from jrigid.body import RigidBody
+from jrigid.inertia._checks import _sorted3
+from jrigid.scene import Gravity, Pivot, Scene
+
+
+def _run(code: str) -> subprocess.CompletedProcess:
+    env = dict(os.environ, JAX_PLATFORMS="cpu")
+    return subprocess.run([sys.executable, "-c", textwrap.dedent(code)], env=env,
+                          capture_output=True, text=True, timeout=300)
+
+
+_READ = "from jax._src import xla_bridge; print(xla_bridge._CPU_ENABLE_ASYNC_DISPATCH.value)"
+
+
+_JAX_FIRST = """
+import jax
+import jrigid
+import jax.numpy as jnp
+jnp.zeros(1).block_until_ready()
+"""
+
+_JRIGID_FIRST = """
+import sys
+import jrigid
+assert "jax" not in sys.modules  # importing jrigid alone still does not import JAX
+import jax.numpy as jnp
+jnp.zeros(1).block_until_ready()
+"""
+
+
+@pytest.mark.parametrize("code", [_JAX_FIRST, _JRIGID_FIRST], ids=["jax-first", "jrigid-first"])
+def test_importing_jrigid_turns_asynchronous_cpu_dispatch_off(code):
+    out = _run(code + _READ)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["False"]
+
+
+def test_a_users_setting_after_import_wins():
+    out = _run(f"""
+        import jrigid, jax
+        jax.config.update("jax_cpu_enable_async_dispatch", True)
+        {_READ}
+    """)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["True"]
+
+
+def _f(x, y):
+    return {"a": jnp.sin(x) * y[0], "b": jnp.cumsum(x * x) + y[1], "n": jnp.argmax(x)}
+
+
+def test_one_kernel_gives_the_functions_values_and_derivatives():
+    x, y = jnp.array([0.3, -1.2, 2.0]), jnp.array([1.5, -0.5])
+    g = one_kernel(_f)
+    for k in ("a", "b", "n"):
+        np.testing.assert_array_equal(g(x, y)[k], _f(x, y)[k])
+
+    def loss(h):
+        return lambda x, y: jnp.sum(h(x, y)["a"] * h(x, y)["b"])
+
+    want = jax.grad(loss(_f), argnums=(0, 1))(x, y)
+    for got in (
+        jax.grad(loss(g), argnums=(0, 1))(x, y),
+        jax.jit(jax.grad(loss(g), argnums=(0, 1)))(x, y),
+        jax.grad(jax.jit(loss(g)), argnums=(0, 1))(x, y),
+        jax.jacfwd(loss(g), argnums=(0, 1))(x, y),
+    ):
+        for a, b in zip(got, want, strict=True):
+            np.testing.assert_allclose(a, b, rtol=1e-12)
+    xs = jnp.stack([x, 2 * x])
+    batched = jax.vmap(g, in_axes=(0, None))(xs, y)
+    np.testing.assert_allclose(batched["b"][1], _f(xs[1], y)["b"], rtol=1e-12)
+
+
+def test_one_kernel_compiles_into_a_single_kernel():
+    text = jax.jit(one_kernel(_f)).lower(jnp.ones(3), jnp.ones(2)).compile().as_text()
+    entry = text[text.index("ENTRY"):]
+    assert "xla_cpu_small_call" in entry
+    assert " while(" not in entry
+
+
+def _scenes():
+    rotor = Scene(RigidBody(jnp.array([1.0, 2.0, 3.0])))
+    top = Scene(RigidBody(jnp.array([1.0, 1.0, 0.5]), mass=1.0, com=jnp.array([0.0, 0.0, 1.0])),
+                holder=Pivot(), loads=(Gravity(1.0),))
+    return [rotor, top]
+
+
+@pytest.mark.parametrize("scene", _scenes(), ids=["rotor", "top"])
+def test_the_default_final_state_solve_is_one_kernel(scene):
+    # Anything XLA:CPU cannot put in a kernel (a sort, a scatter, a runtime error) in the
+    # default path would put ~100 operations back at the top of the program.
+    state = initial.from_omega(jnp.array([1.0, 0.1, 0.0, 0.0]), jnp.array([0.3, 0.2, 5.0]))
+    ts = jnp.array([0.0, 1.0])
+    solve = jax.jit(lambda s: simulate(scene, s, ts, throw=False).q)
+    entry = solve.lower(state).compile().as_text()
+    entry = entry[entry.index("ENTRY"):]
+    assert entry.count("xla_cpu_small_call") == 1
+    assert " while(" not in entry and "custom-call(" not in entry
+
+
+def test_two_output_times_give_the_end_state_of_a_longer_output():
+    scene = _scenes()[1]
+    state = initial.from_omega(jnp.array([1.0, 0.1, 0.0, 0.0]), jnp.array([0.3, 0.2, 5.0]))
+    two = simulate(scene, state, jnp.array([0.0, 5.0]))
+    three = simulate(scene, state, jnp.array([0.0, 2.5, 5.0]))
+    assert int(two.stats["num_steps"]) == int(three.stats["num_steps"])
+    np.testing.assert_allclose(two.q[-1], three.q[-1], atol=1e-13)
+    np.testing.assert_allclose(two.omega[-1], three.omega[-1], atol=1e-13)
+    np.testing.assert_array_equal(two.q[0], three.q[0])
+
+
+def test_two_output_times_report_an_exhausted_budget():
+    scene = _scenes()[0]
+    state = initial.from_omega(omega=jnp.array([1.0, 0.3, 0.7]))
+    two = simulate(scene, state, jnp.array([0.0, 100.0]), max_steps=5, throw=False)
+    three = simulate(scene, state, jnp.array([0.0, 50.0, 100.0]), max_steps=5, throw=False)
+    assert int(two.result) == int(three.result) != 0
+    assert float(two.t_stop) == float(three.t_stop) < 100.0
+    assert np.all(np.isnan(two.q[-1])) and np.all(np.isfinite(two.q[0]))
+
+
+def test_sorted3_sorts_exactly():
+    rng = np.random.default_rng(0)
+    m = rng.normal(size=(500, 3)) * 10.0 ** rng.integers(-8, 8, size=(500, 1))
+    m[:50, 1] = m[:50, 0]  # ties
+    m[50:60] = 1.0
+    np.testing.assert_array_equal(_sorted3(jnp.asarray(m)), np.sort(m, axis=-1))
