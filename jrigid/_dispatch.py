@@ -14,8 +14,10 @@ steps costs more in the slow way than in its steps (measured on the free rotor o
   chain) are scheduled as a dataflow graph on XLA's thread pool, again with hand-overs
   between threads; the default solve has about 100. A ``while`` loop free of sorts,
   scatters and custom calls is compiled into a single kernel (with the threshold
-  :mod:`jrigid._xla` raises). :func:`one_kernel` puts a whole function inside a loop that
-  runs once, so that the program is that one kernel.
+  ``jrigid._xla`` raises). :func:`one_kernel` puts a whole function inside a loop that
+  runs once, so that the program is that one kernel. (``simulate`` saves its outputs
+  through its step-size controller, :mod:`jrigid.solve.saving`, because diffrax's
+  ``SaveAt(ts=...)`` checks ``ts`` with runtime errors, which are custom calls.)
 
 Neither alone helps: a solve of 2 steps took 126–135 µs with both off, 131 µs with
 synchronous dispatch only, 125 µs in one kernel only, and 35 µs with both (a hand-written

@@ -1,5 +1,5 @@
 """A small solve on XLA:CPU's fast path (``jrigid._dispatch``): synchronous dispatch set on
-import, the whole final-state solve compiled into one kernel, and derivatives through it."""
+import, the default solve compiled into one kernel, and derivatives through it."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ import subprocess
 import sys
 import textwrap
 
+import diffrax
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -103,17 +104,32 @@ def _scenes():
     return [rotor, top]
 
 
+@pytest.mark.parametrize("n_out", [2, 11])
 @pytest.mark.parametrize("scene", _scenes(), ids=["rotor", "top"])
-def test_the_default_final_state_solve_is_one_kernel(scene):
-    # Anything XLA:CPU cannot put in a kernel (a sort, a scatter, a runtime error) in the
-    # default path would put ~100 operations back at the top of the program.
+def test_the_default_solve_is_one_kernel(scene, n_out):
+    # Anything XLA:CPU cannot put in a kernel (a sort, a scatter, a runtime error such as
+    # diffrax's checks of SaveAt(ts=...)) in the default path would put ~100 operations
+    # back at the top of the program.
     state = initial.from_omega(jnp.array([1.0, 0.1, 0.0, 0.0]), jnp.array([0.3, 0.2, 5.0]))
-    ts = jnp.array([0.0, 1.0])
+    ts = jnp.linspace(0.0, 1.0, n_out)
     solve = jax.jit(lambda s: simulate(scene, s, ts, throw=False).q)
     entry = solve.lower(state).compile().as_text()
     entry = entry[entry.index("ENTRY"):]
     assert entry.count("xla_cpu_small_call") == 1
     assert " while(" not in entry and "custom-call(" not in entry
+
+
+@pytest.mark.parametrize("scene", _scenes(), ids=["rotor", "top"])
+def test_outputs_saved_by_the_controller_match_diffrax_saving_them(scene):
+    # The default saves through its step-size controller; a user's SaveAt(ts=...) makes
+    # diffrax save. Same steps, same interpolation: the same outputs.
+    state = initial.from_omega(jnp.array([1.0, 0.1, 0.0, 0.0]), jnp.array([0.3, 0.2, 5.0]))
+    ts = jnp.concatenate([jnp.array([0.0, 1e-3]), jnp.linspace(0.5, 7.0, 40)])
+    ours = simulate(scene, state, ts)
+    theirs = simulate(scene, state, ts, saveat=diffrax.SaveAt(ts=ts))
+    assert int(ours.stats["num_steps"]) == int(theirs.stats["num_steps"])
+    np.testing.assert_allclose(ours.q, theirs.q, atol=1e-13)
+    np.testing.assert_allclose(ours.omega, theirs.omega, atol=1e-12)
 
 
 def test_two_output_times_give_the_end_state_of_a_longer_output():
@@ -127,14 +143,16 @@ def test_two_output_times_give_the_end_state_of_a_longer_output():
     np.testing.assert_array_equal(two.q[0], three.q[0])
 
 
-def test_two_output_times_report_an_exhausted_budget():
+@pytest.mark.parametrize("n_out", [2, 21])
+def test_an_exhausted_budget_leaves_the_outputs_after_the_stop_nan(n_out):
     scene = _scenes()[0]
     state = initial.from_omega(omega=jnp.array([1.0, 0.3, 0.7]))
-    two = simulate(scene, state, jnp.array([0.0, 100.0]), max_steps=5, throw=False)
-    three = simulate(scene, state, jnp.array([0.0, 50.0, 100.0]), max_steps=5, throw=False)
-    assert int(two.result) == int(three.result) != 0
-    assert float(two.t_stop) == float(three.t_stop) < 100.0
-    assert np.all(np.isnan(two.q[-1])) and np.all(np.isfinite(two.q[0]))
+    ts = jnp.linspace(0.0, 100.0, n_out)
+    traj = simulate(scene, state, ts, max_steps=5, throw=False)
+    assert int(traj.result) != 0 and float(traj.t_stop) < 100.0
+    reached = np.asarray(ts) <= float(traj.t_stop)
+    assert np.all(np.isfinite(np.asarray(traj.q)[reached]))
+    assert np.all(np.isnan(np.asarray(traj.q)[~reached]))
 
 
 def test_sorted3_sorts_exactly():

@@ -28,6 +28,7 @@ __all__ = [
     "PI_COEFFICIENTS",
     "ProjectedSolver",
     "VectorPIDController",
+    "WrappedSolver",
     "controller",
     "interpolating_at",
     "projected",
@@ -45,29 +46,16 @@ __all__ = [
 DEFAULT_SOLVER = TightDop853
 
 
-class ProjectedSolver(diffrax.AbstractWrappedSolver):
-    """Wrap a diffrax solver; project every step's result back onto the constraints.
-
-    ``step`` calls the inner solver, then replaces ``y1`` by
-    ``formulation.project(y1, args, invariants)``: ``q ← q/|q|`` (and for
-    ``quaternion_acceleration`` ``q̇ ← ½ q ⊗ (0, ω)``, which keeps ``q·q̇ = 0``), and,
-    when ``invariants`` is given, the smallest change of ``(q, ω)`` that restores the
-    scene's conserved quantities (:func:`jrigid.invariants.project`). The error estimate
-    is the inner solver's, so step control is unchanged. A first-same-as-last solver
-    reuses its last stage, evaluated before projection, in the next step: the mismatch
-    is of the size of the projection (the local error), so the order is unaffected.
+class WrappedSolver(diffrax.AbstractWrappedSolver):
+    """A diffrax solver wrapping another, forwarding everything to it: the base of
+    jrigid's wrappers (:class:`ProjectedSolver`, :class:`~jrigid.solve.saving.SavingSolver`),
+    which override what they change.
 
     Attributes:
-        solver: the wrapped diffrax solver (any; ``isinstance`` checks see through it).
-        formulation: the formulation (or its flat form, :class:`~jrigid.solve.Flat`)
-            whose :meth:`~jrigid.formulations.AbstractFormulation.project` is applied.
-        invariants: the values to restore (:class:`~jrigid.invariants.Invariants`), or
-            ``None`` for the constraint manifold only.
+        solver: the wrapped diffrax solver (``isinstance`` checks see through it).
     """
 
     solver: diffrax.AbstractSolver
-    formulation: AbstractFormulation | Flat = eqx.field(static=True)
-    invariants: Invariants | None = None
 
     @property
     def term_structure(self):
@@ -108,6 +96,36 @@ class ProjectedSolver(diffrax.AbstractWrappedSolver):
         return self.solver.init(terms, t0, t1, y0, args)
 
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
+        return self.solver.step(terms, t0, t1, y0, args, solver_state, made_jump)
+
+    def func(self, terms, t0, y0, args):
+        return self.solver.func(terms, t0, y0, args)
+
+
+class ProjectedSolver(WrappedSolver):
+    """Wrap a diffrax solver; project every step's result back onto the constraints.
+
+    ``step`` calls the inner solver, then replaces ``y1`` by
+    ``formulation.project(y1, args, invariants)``: ``q ← q/|q|`` (and for
+    ``quaternion_acceleration`` ``q̇ ← ½ q ⊗ (0, ω)``, which keeps ``q·q̇ = 0``), and,
+    when ``invariants`` is given, the smallest change of ``(q, ω)`` that restores the
+    scene's conserved quantities (:func:`jrigid.invariants.project`). The error estimate
+    is the inner solver's, so step control is unchanged. A first-same-as-last solver
+    reuses its last stage, evaluated before projection, in the next step: the mismatch
+    is of the size of the projection (the local error), so the order is unaffected.
+
+    Attributes:
+        solver: the wrapped diffrax solver (any; ``isinstance`` checks see through it).
+        formulation: the formulation (or its flat form, :class:`~jrigid.solve.Flat`)
+            whose :meth:`~jrigid.formulations.AbstractFormulation.project` is applied.
+        invariants: the values to restore (:class:`~jrigid.invariants.Invariants`), or
+            ``None`` for the constraint manifold only.
+    """
+
+    formulation: AbstractFormulation | Flat = eqx.field(static=True)
+    invariants: Invariants | None = None
+
+    def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
         y1, y_error, dense_info, solver_state, result = self.solver.step(
             terms, t0, t1, y0, args, solver_state, made_jump
         )
@@ -115,9 +133,6 @@ class ProjectedSolver(diffrax.AbstractWrappedSolver):
         if isinstance(dense_info, dict) and "y1" in dense_info:
             dense_info = dict(dense_info, y1=y1)
         return y1, y_error, dense_info, solver_state, result
-
-    def func(self, terms, t0, y0, args):
-        return self.solver.func(terms, t0, y0, args)
 
     def outputs(self, ys, args, y0):
         """The saved states ``ys`` (leading axis: the saved times) projected the same way.
@@ -288,18 +303,19 @@ class VectorPIDController(diffrax.PIDController):
 PI_COEFFICIENTS = dict(pcoeff=0.3, icoeff=0.3)
 
 
-def controller(ts, rtol, atol, norm=None, layout=None) -> VectorPIDController:
+def controller(ts, rtol, atol, norm=None, layout=None, cls=None, **fields) -> VectorPIDController:
     """The step-size controller of every jrigid solve: a PI controller (coefficients
     :data:`PI_COEFFICIENTS`) on the error scaled per vector (:class:`VectorPIDController`;
     ``layout``: the :class:`~jrigid.solve.flat.Flat` of a flat state), ``norm`` diffrax's
-    default RMS unless given.
+    default RMS unless given; ``cls`` a subclass to build instead, with its own ``fields``
+    (:class:`~jrigid.solve.saving.SavingController`).
 
     ``dtmin`` is ``4 eps max(|t0|, |t1|)`` without forcing: a smaller step ends the solve
     with ``dt_min_reached`` (:attr:`~jrigid.trajectory.Result.step_size_collapse` or ``nonfinite``).
     """
     eps = jnp.finfo(ts.dtype).eps
     extra = {} if norm is None else {"norm": norm}
-    return VectorPIDController(
+    return (VectorPIDController if cls is None else cls)(
         rtol=rtol,
         atol=atol,
         dtmin=4 * eps * jnp.maximum(jnp.abs(ts[0]), jnp.abs(ts[-1])),
@@ -307,6 +323,7 @@ def controller(ts, rtol, atol, norm=None, layout=None) -> VectorPIDController:
         layout=layout,
         **PI_COEFFICIENTS,
         **extra,
+        **fields,
     )
 
 
