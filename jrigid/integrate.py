@@ -20,7 +20,9 @@ so changing them does not recompile. When nothing but the outputs at ``ts`` is a
 diffrax (no ``saveat``, ``dense``, ``stepsize_controller`` or event; an explicit solver;
 the default or forward-mode adjoint), the outputs are saved by the step-size controller
 (:mod:`jrigid.solve.saving`) and the whole program runs as one XLA:CPU kernel on the
-calling thread (``jrigid._dispatch``): a call then costs its steps and about 35 µs.
+calling thread (``jrigid._dispatch``): a jitted call returning a few arrays then costs its
+steps and about 40 µs. Returning the whole ``Trajectory`` (22 arrays) adds about 0.14 ms,
+as XLA initialises and copies each output outside the kernel.
 
 Input errors: a wrong type or shape raises ``ValueError`` before anything is compiled.
 Bad values (a zero quaternion, a non-physical inertia, NaN state, impossible
