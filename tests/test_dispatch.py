@@ -161,3 +161,24 @@ def test_sorted3_sorts_exactly():
     m[:50, 1] = m[:50, 0]  # ties
     m[50:60] = 1.0
     np.testing.assert_array_equal(_sorted3(jnp.asarray(m)), np.sort(m, axis=-1))
+
+
+def test_saving_controller_and_saved_refuse_what_they_cannot_use():
+    from jrigid.solve import SavingController, saved
+    from jrigid.solvers import TightDop853
+
+    interp = TightDop853.interpolation_cls
+    kw = dict(rtol=1e-6, atol=1e-8)
+    with pytest.raises(ValueError, match="output_ts"):
+        SavingController(**kw, interpolation_cls=interp)
+    with pytest.raises(ValueError, match="output_ts"):
+        SavingController(**kw, output_ts=jnp.ones((2, 2)), interpolation_cls=interp)
+    with pytest.raises(ValueError, match="interpolation_cls"):
+        SavingController(**kw, output_ts=jnp.array([0.0, 1.0]))
+    with pytest.raises(ValueError, match="loop_kind"):
+        SavingController(**kw, output_ts=jnp.array([0.0, 1.0]), interpolation_cls=interp,
+                         loop_kind="bounded")
+    sol = diffrax.diffeqsolve(diffrax.ODETerm(lambda t, y, a: -y), diffrax.Tsit5(), 0.0, 1.0,
+                              0.1, jnp.ones(2))
+    with pytest.raises(ValueError, match="controller_state"):
+        saved(sol, jnp.array([0.0, 1.0]))

@@ -70,6 +70,18 @@ class SavingController(VectorPIDController):
     interpolation_cls: type | None = eqx.field(static=True, default=None)
     loop_kind: str = eqx.field(static=True, default="checkpointed")
 
+    def __check_init__(self):
+        if self.output_ts is None or jnp.ndim(self.output_ts) != 1 or not jnp.shape(
+                self.output_ts)[0]:
+            raise ValueError("SavingController needs output_ts, a (T,) array of output "
+                             f"times with T >= 1, got {self.output_ts!r}")
+        if self.interpolation_cls is None:
+            raise ValueError("SavingController needs the solver's interpolation_cls")
+        if self.loop_kind not in ("checkpointed", "lax"):
+            raise ValueError(
+                f"loop_kind must be 'checkpointed' or 'lax', got {self.loop_kind!r}"
+            )
+
     def init(self, terms, t0, t1, y0, dt0, args, func, error_order):
         t_next, state = super().init(terms, t0, t1, y0, dt0, args, func, error_order)
         ys = jnp.full((self.output_ts.shape[0],) + jnp.shape(y0), jnp.nan, jnp.result_type(y0))
@@ -104,6 +116,9 @@ def saved(sol: diffrax.Solution, ts):
     with ``SaveAt(t1=True, controller_state=True)``, laid out as diffrax's
     ``SaveAt(ts=ts, t1=True)`` lays them out: the output times reached (``inf`` beyond),
     then the final time; the states at them (NaN beyond), then the final state."""
+    if sol.controller_state is None:
+        raise ValueError("saved() needs the solve's controller state: solve with "
+                         "SaveAt(t1=True, controller_state=True) and a SavingController")
     _, ys = sol.controller_state
     t_end = sol.ts[-1]
     saved_ts = jnp.concatenate([jnp.where(ts <= t_end, ts, jnp.inf), sol.ts[-1:]])
