@@ -94,29 +94,76 @@ class SimulationError(RuntimeError):
     """A failed integration (cause, time reached, step counts and a remedy in the text)."""
 
 
-def _derived(scene: Scene, formulation: AbstractFormulation, y) -> dict[str, Any]:
-    """Physical quantities at one (unbatched) state."""
+def _quantity(name: str, scene: Scene, formulation: AbstractFormulation, y):
+    """The physical quantity ``name`` (a :class:`Trajectory` property) at one state."""
+    if name == "norm_error":
+        raw = formulation.raw_quaternion(y)
+        return None if raw is None else jnp.sqrt(jnp.dot(raw, raw)) - 1.0
+    if name == "tangent_error":
+        return formulation.tangent_error(y)
     kin = formulation.kinematics(scene, y)
-    out = dict(omega=kin.omega, x=kin.x, v=kin.v)
-    out["L"] = scene.angular_momentum(kin.omega)
-    out["kinetic_energy"] = scene.kinetic_energy(kin.omega, kin.v)
+    if name in ("q", "omega", "x", "v"):
+        return getattr(kin, name)
+    if name == "kinetic_energy":
+        return scene.kinetic_energy(kin.omega, kin.v)
+    if name == "potential_energy":
+        if kin.q is None:
+            return jnp.zeros((), kin.omega.dtype)
+        return scene.potential_energy(kin)
+    L = scene.angular_momentum(kin.omega)
+    if name == "L":
+        return L
     if kin.q is None:
-        out.update(q=None, omega_space=None, L_space=None, axes=None)
-        out["potential_energy"] = jnp.zeros((), kin.omega.dtype)
-    else:
-        out["q"] = kin.q
-        out["omega_space"] = quat.rotate(kin.q, kin.omega)
-        out["L_space"] = quat.rotate(kin.q, out["L"])
-        out["axes"] = quat.to_matrix(kin.q)
-        out["potential_energy"] = scene.potential_energy(kin)
-    raw = formulation.raw_quaternion(y)
-    out["norm_error"] = None if raw is None else jnp.sqrt(jnp.dot(raw, raw)) - 1.0
-    out["tangent_error"] = formulation.tangent_error(y)
-    return out
+        return None
+    if name == "omega_space":
+        return quat.rotate(kin.q, kin.omega)
+    if name == "L_space":
+        return quat.rotate(kin.q, L)
+    if name == "axes":
+        return quat.to_matrix(kin.q)
+    raise AttributeError(name)  # pragma: no cover - every _Derived name is handled above
+
+
+@eqx.filter_jit
+def _quantities(name, formulation, scene, y, batch_ndim):
+    """``name`` at every state of ``y`` (leading axes: ``batch_ndim`` member axes, which
+    the scene's arrays have too, then the time axis)."""
+    def over_time(scene, y):
+        return jax.vmap(lambda y: _quantity(name, scene, formulation, y))(y)
+
+    fn = over_time
+    for _ in range(batch_ndim):
+        fn = eqx.filter_vmap(fn)
+    return fn(scene, y)
+
+
+class _Derived:
+    """A :class:`Trajectory` quantity computed from its states on first access and kept
+    (on the instance; a transformed or rebuilt trajectory computes it again)."""
+
+    def __init__(self, doc: str):
+        self.__doc__ = doc
+
+    def __set_name__(self, owner, name):
+        self.name = name
+
+    def __get__(self, traj, owner=None):
+        if traj is None:
+            return self
+        kept = traj.__dict__
+        if self.name not in kept:
+            kept[self.name] = _quantities(self.name, traj.formulation, traj.scene, traj.y,
+                                          jnp.ndim(traj.result))
+        return kept[self.name]
 
 
 class Trajectory(eqx.Module):
-    """A solved motion sampled at times ``ts`` (all arrays have leading axis ``T``).
+    """A solved motion sampled at times ``ts`` (arrays have leading axis ``T``).
+
+    The solve returns the formulation's states ``y``, the outcome and the scene; the
+    physical quantities (``q``, ``omega``, ``L``, the energies, ...) are computed from
+    them on first access and then kept, so that a call returns only what it computed.
+    (Under ``vmap`` every array, the scene's included, has the member axes first.)
 
     Attributes:
         ts: ``(T,)`` times.
@@ -148,18 +195,6 @@ class Trajectory(eqx.Module):
 
     ts: jax.Array
     y: Any
-    q: jax.Array | None
-    omega: jax.Array
-    omega_space: jax.Array | None
-    L: jax.Array
-    L_space: jax.Array | None
-    kinetic_energy: jax.Array
-    potential_energy: jax.Array
-    norm_error: jax.Array | None
-    tangent_error: jax.Array | None
-    axes: jax.Array | None
-    x: jax.Array | None
-    v: jax.Array | None
     stats: dict
     result: jax.Array
     t_stop: jax.Array
@@ -167,23 +202,27 @@ class Trajectory(eqx.Module):
     formulation: AbstractFormulation = eqx.field(static=True)
     interpolation: Any = None
 
+    q = _Derived("``(T, 4)`` unit orientation, or ``None`` (``body_omega``).")
+    omega = _Derived("``(T, 3)`` body angular velocity.")
+    omega_space = _Derived("``(T, 3)`` space angular velocity (or ``None``).")
+    L = _Derived("``(T, 3)`` body-frame angular momentum about the rotation centre.")
+    L_space = _Derived("``(T, 3)`` space-frame angular momentum (or ``None``).")
+    kinetic_energy = _Derived("``(T,)`` rotational (+ translational) kinetic energy.")
+    potential_energy = _Derived("``(T,)`` potential energy of the conservative loads.")
+    norm_error = _Derived("``(T,)`` ``|q| − 1`` of the integrated quaternion, or ``None``.")
+    tangent_error = _Derived("``(T,)`` ``q·q̇`` (``quaternion_acceleration``), or ``None``.")
+    axes = _Derived("``(T, 3, 3)`` rotation matrices (columns: body axes in space), or "
+                    "``None``.")
+    x = _Derived("``(T, 3)`` centre-of-mass position (free flight), else ``None``.")
+    v = _Derived("``(T, 3)`` centre-of-mass velocity (free flight), else ``None``.")
+
     @classmethod
     def build(
         cls, scene, formulation, ts, ys, *, stats, result, t_stop, interpolation=None
     ) -> Trajectory:
         """Assemble a trajectory from formulation states ``ys`` (leading axis ``T``)."""
-        derived = jax.vmap(lambda y: _derived(scene, formulation, y))(ys)
-        return cls(
-            ts=ts,
-            y=ys,
-            stats=stats,
-            result=result,
-            t_stop=t_stop,
-            scene=scene,
-            formulation=formulation,
-            interpolation=interpolation,
-            **derived,
-        )
+        return cls(ts=ts, y=ys, stats=stats, result=result, t_stop=t_stop, scene=scene,
+                   formulation=formulation, interpolation=interpolation)
 
     @property
     def energy(self) -> jax.Array:

@@ -2,6 +2,8 @@
 error a failed solve raises."""
 
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 from _simulate import (
@@ -16,7 +18,10 @@ from _simulate import (
 from _simulate import free_reference as _free_reference
 
 from jrigid import initial
+from jrigid.body import RigidBody
 from jrigid.integrate import simulate
+from jrigid.scene import Gravity, Pivot, Scene
+from jrigid.state import State
 from jrigid.trajectory import CAUSES, Result, SimulationError
 
 
@@ -43,6 +48,61 @@ def test_trajectory_quantities_are_consistent(free_reference):
         rtol=1e-12,
     )
     assert traj.x is None and traj.v is None
+
+
+def _top_members():
+    """Three heavy tops (different bodies, spins and gravity) and their states."""
+    moments = jnp.array([[0.5, 0.5, 0.8], [0.6, 0.5, 0.9], [0.4, 0.45, 0.7]])
+    scenes = [Scene(RigidBody(m, com=jnp.array([0.0, 0.0, 1.0])), Pivot(), Gravity(g))
+              for m, g in zip(moments, (1.0, 2.0, 0.5), strict=True)]
+    states = [initial.from_euler_rates([0.0, 0.6, 0.0], [0.3, 0.0, w]) for w in (5.0, 3.0, 8.0)]
+    return scenes, states
+
+
+_QUANTITIES = ("q", "omega", "omega_space", "L", "L_space", "kinetic_energy",
+               "potential_energy", "energy", "norm_error", "tangent_error", "axes")
+
+
+def test_quantities_of_a_vmapped_solve_are_those_of_its_members():
+    """Computed on access from the states: per member, with each member's own scene."""
+    scenes, states = _top_members()
+    ts = jnp.linspace(0.0, 2.0, 5)
+    stack = lambda *xs: jax.tree_util.tree_map(lambda *a: jnp.stack(a), *xs)  # noqa: E731
+    batch = jax.vmap(lambda sc, s: simulate(sc, s, ts))(stack(*scenes), stack(*states))
+    assert batch.L.shape == (3, 5, 3) and batch.axes.shape == (3, 5, 3, 3)
+    for k, (scene, state) in enumerate(zip(scenes, states, strict=True)):
+        alone = simulate(scene, state, ts)
+        member = jax.tree_util.tree_map(lambda a, k=k: a[k], batch)
+        for name in _QUANTITIES:
+            np.testing.assert_allclose(getattr(batch, name)[k], getattr(alone, name),
+                                       rtol=1e-10, atol=1e-12, err_msg=name)
+            np.testing.assert_allclose(getattr(member, name), getattr(alone, name),
+                                       rtol=1e-10, atol=1e-12, err_msg=name)
+    # the energy of each member is its own: different gravity, different energy
+    assert len({round(float(e), 6) for e in batch.energy[:, 0]}) == 3
+
+
+def test_quantities_are_kept_and_the_same_inside_jit():
+    scenes, states = _top_members()
+    traj = simulate(scenes[1], states[1], jnp.linspace(0.0, 1.0, 4))
+    assert traj.L is traj.L  # computed once
+    inside = jax.jit(lambda t: (t.L_space, t.potential_energy, t.q))(traj)
+    for got, name in zip(inside, ("L_space", "potential_energy", "q"), strict=True):
+        np.testing.assert_allclose(got, getattr(traj, name), rtol=1e-14, atol=1e-15)
+    # L from the states by hand: the pivot inertia (parallel axes) times ω
+    inertia = np.diag([0.6, 0.5, 0.9]) + np.diag([1.0, 1.0, 0.0])
+    np.testing.assert_allclose(traj.L, np.asarray(traj.omega) @ inertia.T, rtol=1e-12)
+
+
+def test_an_invalid_member_keeps_its_scene_and_times():
+    # a zero quaternion: solved with stand-in inputs, returned with the given ones
+    scene, state = free_scene(), State(jnp.zeros(4), jnp.zeros(4))
+    ts = jnp.linspace(2.0, 3.0, 4)
+    traj = simulate(scene, state, ts, throw=False)
+    assert int(traj.result) == Result.invalid_input
+    np.testing.assert_array_equal(traj.ts, ts)
+    np.testing.assert_array_equal(traj.scene.body.moments, MOMENTS)
+    assert np.isnan(np.asarray(traj.q)).all() and np.isnan(np.asarray(traj.energy)).all()
 
 
 def test_dense_output():
