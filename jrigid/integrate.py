@@ -61,7 +61,7 @@ import jax
 import jax.numpy as jnp
 from jax.typing import ArrayLike
 
-from jrigid import closed_form, splitting
+from jrigid import closed_form, splitting, trajectory
 from jrigid._dispatch import one_kernel
 from jrigid.formulations import AbstractFormulation, check_scene, get_formulation
 from jrigid.invariants import Invariants
@@ -140,19 +140,25 @@ def _solve(scene, state, ts, rtol, atol, *options):
     ``options`` (everything but the arrays) are hashable in the common case: then the
     solve is a ``jax.jit`` function cached per options, which dispatches in about half the
     time of ``equinox.filter_jit`` (what a plain call in a loop pays). Otherwise (an
-    option holding arrays), ``equinox.filter_jit``.
+    option holding arrays), ``equinox.filter_jit``. The trajectory's scene (and ``ts``,
+    unless a ``saveat`` chose the times) are the inputs, put back here.
     """
+    traj = None
     try:
         compiled = _compiled(options)
     except TypeError:  # unhashable options
-        return _filter_solve(scene, state, ts, rtol, atol, *options)
-    try:
-        traj, cause = compiled.fn(scene, state, ts, rtol, atol)
-    except TypeError as error:
-        if "not a valid JAX type" not in str(error):
-            raise
-        return _filter_solve(scene, state, ts, rtol, atol, *options)
-    return traj, cause, _Messages(compiled.messages, (scene, state))
+        compiled = None
+    if compiled is not None:
+        try:
+            traj, cause = compiled.fn(scene, state, ts, rtol, atol)
+            messages = _Messages(compiled.messages, (scene, state))
+        except TypeError as error:
+            if "not a valid JAX type" not in str(error):
+                raise
+    if traj is None:
+        traj, cause, messages = _filter_solve(scene, state, ts, rtol, atol, *options)
+    ts = ts if traj.ts is None else traj.ts
+    return trajectory.replace(traj, scene=scene, ts=ts), cause, messages
 
 
 class _Messages(collections.abc.Sequence):
@@ -231,10 +237,10 @@ def _solve_body(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoint,
     if saves_itself:
         solve = one_kernel(solve)
     traj, cause = solve(scene, state, ts, rtol, atol, dt0)
-    # The scene and the output times as given (an invalid member was solved with stand-ins):
-    # inputs, which a compiled call passes through rather than computing and copying them.
-    keep = (lambda t: (t.scene, t.ts)) if saveat is None else (lambda t: t.scene)
-    traj = eqx.tree_at(keep, traj, (scene, ts) if saveat is None else scene)
+    # The scene and the output times are the inputs (an invalid member was solved with
+    # stand-ins): :func:`_solve` puts them back, so that a compiled program does not copy
+    # inputs to its outputs.
+    traj = trajectory.replace(traj, scene=None, ts=None if saveat is None else traj.ts)
     return traj, cause, tuple(messages)
 
 
