@@ -294,7 +294,10 @@ def _solve_arrays(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoin
         saved_ts, ys = (jnp.concatenate([a, a[-1:]]) for a in (sol.ts, sol.ys))
     elif saves_itself:
         saved_ts, ys = saved(sol, ts)
-    if projection is not None:
+    if projection is not None and not ends_only:
+        # Interpolated outputs are projected here; the two ends are the initial state and
+        # a step's result, both projected already (and projecting them again doubled the
+        # projection's share of compilation: 1 s of the heavy top's 2).
         ys = projection.outputs(ys, scene, y0_flat)
     ys = flat.states(ys)
     interpolation = flat.interpolation(sol.interpolation) if (dense or saveat.dense) else None
