@@ -174,10 +174,11 @@ class _Derived:
 class Trajectory(eqx.Module):
     """A solved motion sampled at times ``ts`` (arrays have leading axis ``T``).
 
-    The solve returns the formulation's states ``y``, the outcome and the scene; the
-    physical quantities (``q``, ``omega``, ``L``, the energies, ...) are computed from
-    them on first access and then kept, so that a call returns only what it computed.
-    (Under ``vmap`` every array, the scene's included, has the member axes first.)
+    The solve returns the formulation's states ``y``, ``q``, ``omega`` and the outcome;
+    the other physical quantities (``L``, the energies, the axes, ...) are computed from
+    the states on first access and then kept, so that a compiled call returns few arrays
+    (each costs it a copy). (Under ``vmap`` every array, the scene's included, has the
+    member axes first.)
 
     Attributes:
         ts: ``(T,)`` times.
@@ -209,6 +210,8 @@ class Trajectory(eqx.Module):
 
     ts: jax.Array
     y: Any
+    q: jax.Array | None
+    omega: jax.Array
     stats: dict
     result: jax.Array
     t_stop: jax.Array
@@ -216,8 +219,6 @@ class Trajectory(eqx.Module):
     formulation: AbstractFormulation = eqx.field(static=True)
     interpolation: Any = None
 
-    q = _Derived("``(T, 4)`` unit orientation, or ``None`` (``body_omega``).")
-    omega = _Derived("``(T, 3)`` body angular velocity.")
     omega_space = _Derived("``(T, 3)`` space angular velocity (or ``None``).")
     L = _Derived("``(T, 3)`` body-frame angular momentum about the rotation centre.")
     L_space = _Derived("``(T, 3)`` space-frame angular momentum (or ``None``).")
@@ -235,8 +236,10 @@ class Trajectory(eqx.Module):
         cls, scene, formulation, ts, ys, *, stats, result, t_stop, interpolation=None
     ) -> Trajectory:
         """Assemble a trajectory from formulation states ``ys`` (leading axis ``T``)."""
-        return cls(ts=ts, y=ys, stats=stats, result=result, t_stop=t_stop, scene=scene,
-                   formulation=formulation, interpolation=interpolation)
+        kin = jax.vmap(lambda y: formulation.kinematics(scene, y))(ys)
+        return cls(ts=ts, y=ys, q=kin.q, omega=kin.omega, stats=stats, result=result,
+                   t_stop=t_stop, scene=scene, formulation=formulation,
+                   interpolation=interpolation)
 
     @property
     def energy(self) -> jax.Array:

@@ -186,13 +186,15 @@ def test_saving_controller_and_saved_refuse_what_they_cannot_use():
 
 def test_a_plain_call_returns_its_inputs_and_computes_quantities_when_read():
     # What a plain call's program returns is what it costs (each output is initialised
-    # and copied outside the kernel): the states and the outcome only.
+    # and copied outside the kernel): the states, q, ω and the outcome only.
     scene = _scenes()[1]
     state = initial.from_omega(jnp.array([1.0, 0.1, 0.0, 0.0]), jnp.array([0.3, 0.2, 5.0]))
     ts = jnp.linspace(0.0, 1.0, 3)
     traj = simulate(scene, state, ts)
     assert traj.scene is scene and traj.ts is ts
-    assert not {"q", "omega", "L", "axes"} & set(vars(traj))
+    assert not {"L", "L_space", "axes", "kinetic_energy"} & set(vars(traj))
     np.testing.assert_allclose(traj.q, traj.y.q / np.linalg.norm(traj.y.q, axis=-1)[:, None],
                                rtol=1e-15)
-    assert "q" in vars(traj)
+    inertia = np.asarray(scene.inertia())
+    np.testing.assert_allclose(traj.L, np.asarray(traj.omega) @ inertia.T, rtol=1e-13)
+    assert "L" in vars(traj)
