@@ -15,6 +15,7 @@ BENCH = pathlib.Path(__file__).resolve().parents[1] / "benchmarks"
 sys.path.insert(0, str(BENCH))
 
 import harness  # noqa: E402
+import outputs  # noqa: E402
 import speed_vs_error as sve  # noqa: E402
 import splitting as sp  # noqa: E402
 
@@ -152,6 +153,23 @@ def test_quick_run_produces_table_plot_and_finite_errors(tmp_path):
     tte = data["problems"]["free_rotor"]["summary"]["time_to_error"][sve.DEFAULT]
     assert tte["0.0001"]["seconds"] is not None
     assert out["markdown"] == md
+
+
+def test_outputs_quick_run_times_every_call_and_measures_its_error(tmp_path):
+    outputs.main(["--quick", "--out", str(tmp_path)])
+    md = (tmp_path / "outputs_quick.md").read_text()
+    assert "Machine: " in md and "| T | call |" in md
+    rows = json.loads((tmp_path / "outputs_quick.json").read_text())["rows"]
+    assert {r["T"] for r in rows} == {2, 101} and len(rows) == 8
+    assert all(r["median"] > 0 and math.isfinite(r["error"]) for r in rows)
+    by = {(r["T"], r["method"]): r for r in rows}
+    for T in (2, 101):
+        jitted, plain = by[T, "jrigid default, jitted"], by[T, "jrigid default, plain call"]
+        assert jitted["error"] == pytest.approx(plain["error"], rel=1e-6)  # the same solve
+        # at equal tolerance the hand-written Dopri8 is far less accurate (no projection,
+        # diffrax's per-entry error scale): what the table's tighter row is for
+        loose = by[T, f"hand-written diffrax Dopri8, rtol {outputs.RTOL:g}"]
+        assert jitted["error"] < 0.1 * loose["error"]
 
 
 # --------------------------------------------------------------------------- ensemble
