@@ -103,7 +103,7 @@ def _quantity(name: str, scene: Scene, formulation: AbstractFormulation, y):
     if name == "tangent_error":
         return formulation.tangent_error(y)
     kin = formulation.kinematics(scene, y)
-    if name in ("q", "omega", "x", "v"):
+    if name in ("x", "v"):
         return getattr(kin, name)
     if name == "kinetic_energy":
         return scene.kinetic_energy(kin.omega, kin.v)
@@ -292,6 +292,12 @@ def replace(traj: Trajectory, **changes) -> Trajectory:
     ``__init__``, and a method of a module is bound on each access, 30 µs each, more than
     the rest of what a plain ``simulate`` call spends in Python.
     """
+    if not isinstance(traj, Trajectory):
+        raise ValueError(f"replace needs a Trajectory, got {type(traj).__name__}")
+    unknown = sorted(set(changes) - set(_FIELDS))
+    if unknown:
+        raise ValueError(f"Trajectory has no field(s) {unknown}; its fields are {list(_FIELDS)} "
+                         "(the other quantities are computed from them)")
     new = object.__new__(Trajectory)
     fields = traj.__dict__
     for name in _FIELDS:

@@ -22,7 +22,7 @@ from jrigid.body import RigidBody
 from jrigid.integrate import simulate
 from jrigid.scene import Gravity, Pivot, Scene
 from jrigid.state import State
-from jrigid.trajectory import CAUSES, Result, SimulationError
+from jrigid.trajectory import CAUSES, Result, SimulationError, replace
 
 
 @pytest.fixture(scope="module")
@@ -103,6 +103,17 @@ def test_an_invalid_member_keeps_its_scene_and_times():
     np.testing.assert_array_equal(traj.ts, ts)
     np.testing.assert_array_equal(traj.scene.body.moments, MOMENTS)
     assert np.isnan(np.asarray(traj.q)).all() and np.isnan(np.asarray(traj.energy)).all()
+
+
+def test_replace_changes_fields_and_refuses_what_is_not_one():
+    traj = simulate(free_scene(), initial.from_omega(Q0, OMEGA0), jnp.linspace(0.0, 1.0, 3))
+    moved = replace(traj, ts=traj.ts + 1.0)
+    np.testing.assert_allclose(moved.ts, np.asarray(traj.ts) + 1.0)
+    np.testing.assert_allclose(moved.L, traj.L)  # computed again, from the same states
+    with pytest.raises(ValueError, match="no field"):
+        replace(traj, L=traj.omega)
+    with pytest.raises(ValueError, match="needs a Trajectory"):
+        replace(traj.y, ts=traj.ts)
 
 
 def test_dense_output():
