@@ -158,11 +158,11 @@ class QuaternionAcceleration(AbstractFormulation):
     def vector_field(self, t, y, scene):
         q, qd = y.q, y.qdot
         n2 = linalg.dot(q, q)
-        omega = 2.0 * quat.multiply(quat.conjugate(q), qd)[1:] / n2
-        kin = Kinematics(q / jnp.sqrt(n2), omega, y.x, y.v)
+        omega = quat.angular_velocity(q, qd) * (1.0 / n2)  # (17.42) off |q| = 1 too
+        kin = Kinematics(linalg.unit(q), omega, y.x, y.v)
         force, torque = scene.wrench(t, kin)
         omega_dot = scene.omega_dot(omega, torque)
-        qdd = 0.5 * quat.multiply(q, _pure(omega_dot)) - linalg.dot(qd, qd) * q
+        qdd = quat.derivative(q, omega_dot) - linalg.dot(qd, qd) * q
         if self.stabilization:
             k = self.stabilization * jnp.sqrt(linalg.dot(omega, omega))
             c = linalg.dot(q, qd)
@@ -209,7 +209,7 @@ class QuaternionOmega(AbstractFormulation):
     def vector_field(self, t, y, scene):
         kin = Kinematics(linalg.unit(y.q), y.omega, y.x, y.v)
         force, torque = scene.wrench(t, kin)
-        qd = 0.5 * quat.multiply(y.q, _pure(y.omega))
+        qd = quat.derivative(y.q, y.omega)
         xd, vd = _translation_rates(scene, y.v, force)
         return QuaternionOmegaState(qd, scene.omega_dot(y.omega, torque), xd, vd)
 

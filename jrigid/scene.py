@@ -397,8 +397,7 @@ class Scene(eqx.Module):
         if self.holder.pivoted:
             tensor = self.inertia()
             return linalg.solve3(tensor, torque - linalg.cross(omega, linalg.matvec(tensor, omega)))
-        moments = self.body.moments
-        return (torque - linalg.cross(omega, moments * omega)) / moments
+        return linalg.euler_diagonal(self.body.moments, omega, torque)
 
     def wrench(self, t, kin: Kinematics) -> tuple[jax.Array, jax.Array]:
         """Total ``(force (3,) space frame, torque (3,) body frame)`` of all loads."""

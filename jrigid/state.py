@@ -34,8 +34,7 @@ def omega_from_rate(q: jax.Array, qdot: jax.Array) -> jax.Array:
     Returns:
         ``(..., 3)`` body-frame angular velocity.
     """
-    n2 = linalg.dot(q, q)[..., None]
-    return 2.0 * quat.multiply(quat.conjugate(q), qdot)[..., 1:] / n2
+    return quat.angular_velocity(q, qdot) * (1.0 / linalg.dot(q, q))[..., None]
 
 
 class State(eqx.Module):

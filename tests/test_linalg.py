@@ -51,3 +51,13 @@ def test_unit_matches_numpy_and_the_scale_safe_normalize():
     lean = np.asarray(linalg.unit(jnp.asarray(big)))  # |q|² overflows: zeros, not unit
     assert not np.isclose(np.linalg.norm(lean), 1.0)
     np.testing.assert_allclose(quat.normalize(big), u[0], rtol=1e-15)
+
+
+def test_euler_diagonal_matches_the_vector_form_of_eulers_equations():
+    # I ω̇ = N − ω × (I ω) (eq. 17.35) with numpy's cross product, on broadcast batches
+    moments = RNG.uniform(0.5, 3.0, size=(4, 1, 3))
+    omega, torque = RNG.normal(size=(4, 2, 3)), RNG.normal(size=(2, 3))
+    expected = (torque - np.cross(omega, moments * omega)) / moments
+    got = linalg.euler_diagonal(jnp.asarray(moments), jnp.asarray(omega), jnp.asarray(torque))
+    assert got.shape == (4, 2, 3)
+    np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-14)
