@@ -159,7 +159,7 @@ class QuaternionAcceleration(AbstractFormulation):
         q, qd = y.q, y.qdot
         n2 = linalg.dot(q, q)
         omega = quat.angular_velocity(q, qd) * (1.0 / n2)  # (17.42) off |q| = 1 too
-        kin = Kinematics(linalg.unit(q), omega, y.x, y.v)
+        kin = Kinematics(linalg.unit(q), omega, y.x, y.v, q_raw=q)
         force, torque = scene.wrench(t, kin)
         omega_dot = scene.omega_dot(omega, torque)
         qdd = quat.derivative(q, omega_dot) - linalg.dot(qd, qd) * q
@@ -207,7 +207,7 @@ class QuaternionOmega(AbstractFormulation):
 
     @_traced_once
     def vector_field(self, t, y, scene):
-        kin = Kinematics(linalg.unit(y.q), y.omega, y.x, y.v)
+        kin = Kinematics(linalg.unit(y.q), y.omega, y.x, y.v, q_raw=y.q)
         force, torque = scene.wrench(t, kin)
         qd = quat.derivative(y.q, y.omega)
         xd, vd = _translation_rates(scene, y.v, force)

@@ -111,7 +111,9 @@ def solve3(m: jax.Array, b: jax.Array) -> jax.Array:
     c1 = cross(m[..., :, 2], m[..., :, 0])
     c2 = cross(m[..., :, 0], m[..., :, 1])
     det = dot(m[..., :, 0], c0)
-    return jnp.stack([dot(c0, b), dot(c1, b), dot(c2, b)], axis=-1) / det[..., None]
+    # times 1/det rather than divided by det: for a constant ``m`` (an inertia inside an
+    # integrator's loop) XLA computes the adjugate and 1/det once, before the loop
+    return jnp.stack([dot(c0, b), dot(c1, b), dot(c2, b)], axis=-1) * (1.0 / det)[..., None]
 
 
 def rescale(x: jax.Array) -> tuple[jax.Array, jax.Array]:

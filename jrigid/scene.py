@@ -149,7 +149,7 @@ class Gravity(AbstractLoad):
         m = scene.body.mass
         zero = jnp.zeros(3, dtype=kin.omega.dtype)
         if scene.holder.pivoted:
-            g_body = quat.rotate_inverse(kin.q, self.g)
+            g_body = kin.to_body(self.g)
             return zero, linalg.cross(scene.body.com, m * g_body)
         if scene.holder.translates:
             return m * self.g, zero
@@ -158,7 +158,7 @@ class Gravity(AbstractLoad):
     def potential(self, kin, scene):
         m = scene.body.mass
         if scene.holder.pivoted:
-            return -m * linalg.dot(self.g, quat.rotate(kin.q, scene.body.com))
+            return -m * linalg.dot(self.g, kin.to_space(scene.body.com))
         if scene.holder.translates:
             return -m * linalg.dot(self.g, kin.x)
         return jnp.zeros((), dtype=kin.omega.dtype)
@@ -206,7 +206,7 @@ class Torque(AbstractLoad):
         if n.shape != (3,):
             raise ValueError(f"Torque fn must return shape (3,), got {n.shape}")
         if self.frame == "space":
-            n = quat.rotate_inverse(kin.q, n)
+            n = kin.to_body(n)
         return jnp.zeros(3, dtype=kin.omega.dtype), n
 
 
