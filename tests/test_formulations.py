@@ -150,6 +150,32 @@ def test_vector_field_is_eulers_equations(name, case):
         np.testing.assert_allclose(from_rates, omega, atol=1e-12)
 
 
+@pytest.mark.parametrize("s", [0.8, 1.25])
+@pytest.mark.parametrize("case", [0, 1], ids=["driven", "top"])
+@pytest.mark.parametrize("name", ["quaternion_acceleration", "quaternion_omega"])
+def test_vector_field_off_the_constraint_acts_on_the_unit_rotation(name, case, s):
+    # |q| = s (a stage of a Runge–Kutta step): the loads see the rotation q/|q| and ω is the
+    # rate of q/|q|, so ω̇ is Euler's equations at the unit state (scipy's rotation)
+    _, scene, torque, moments = _scenes()[case]
+    formulation = FORMULATIONS[name]()
+    q = Rotation.random(random_state=RNG).as_quat(scalar_first=True)
+    omega = RNG.normal(size=3)
+    expected = _euler_rhs(moments, omega, torque(q))
+    qdot = 0.5 * _hamilton(q, np.concatenate([[0.0], omega]))
+    if name == "quaternion_acceleration":
+        y = formulation.from_state(scene, initial.from_omega(jnp.asarray(q), jnp.asarray(omega)))
+        y = type(y)(s * y.q, s * y.qdot, y.x, y.v)
+        dy = formulation.vector_field(0.0, y, scene)
+        qddot = 0.5 * _hamilton(s * q, np.concatenate([[0.0], expected])) - s**3 * (qdot @ qdot) * q
+        np.testing.assert_allclose(dy.qdot, qddot, atol=1e-12)
+    else:
+        y = formulation.from_state(scene, initial.from_omega(jnp.asarray(q), jnp.asarray(omega)))
+        y = type(y)(s * y.q, y.omega, y.x, y.v)
+        dy = formulation.vector_field(0.0, y, scene)
+        np.testing.assert_allclose(dy.q, s * qdot, atol=1e-13)
+        np.testing.assert_allclose(dy.omega, expected, atol=1e-12)
+
+
 @pytest.mark.parametrize("name", list(FORMULATIONS))
 def test_from_state_and_back(name):
     """A state turned into the formulation's variables gives back its q (as a rotation)

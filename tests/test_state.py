@@ -63,3 +63,17 @@ def test_nan_state_is_refused(where):
 def test_wrongly_shaped_state_is_refused():
     with pytest.raises(ValueError, match="shape|4"):
         simulate(free_scene(), State(jnp.ones(3), jnp.zeros(3)), TS[:11])
+
+
+@pytest.mark.parametrize("scale", [None, 1.0, 0.7, 1.3])
+def test_kinematics_frame_changes_match_scipy_with_and_without_the_raw_quaternion(scale):
+    # q_raw of any norm rotates as q_raw / |q_raw| (rotation, then division by |q_raw|²)
+    q = Rotation.random(random_state=RNG).as_quat(scalar_first=True)
+    v, omega = RNG.normal(size=3), RNG.normal(size=3)
+    raw = None if scale is None else jnp.asarray(scale * q)
+    kin = Kinematics(jnp.asarray(q), jnp.asarray(omega), q_raw=raw)
+    rot = Rotation.from_quat(q, scalar_first=True)
+    np.testing.assert_allclose(kin.to_space(jnp.asarray(v)), rot.apply(v), rtol=1e-13, atol=1e-14)
+    np.testing.assert_allclose(kin.to_body(jnp.asarray(v)), rot.inv().apply(v), rtol=1e-13,
+                               atol=1e-14)
+    np.testing.assert_allclose(kin.omega_space, rot.apply(omega), rtol=1e-13, atol=1e-14)
