@@ -193,6 +193,41 @@ def test_jump_recomputes_first_stage():
     np.testing.assert_allclose(a.ys["x"], b.ys["x"], atol=1e-11)
 
 
+def test_tight_dop853_written_out_and_in_diffrax_stage_loop_take_the_same_steps():
+    # the Kepler field is small (written out by default); fuse_below=0 keeps diffrax's loop
+    term = diffrax.ODETerm(kepler)
+    assert TightDop853().fused(term, 0.0, Y0, None)
+    assert not TightDop853(fuse_below=0).fused(term, 0.0, Y0, None)
+    assert not TightDop853(fuse_below=5).fused(term, 0.0, Y0, None)
+    dense = diffrax.SaveAt(ts=jnp.linspace(0.0, 6.0, 37), dense=True)
+    fused, looped = solve(TightDop853(), saveat=dense), solve(TightDop853(fuse_below=0),
+                                                              saveat=dense)
+    for key in ("num_steps", "num_rejected_steps"):
+        assert int(fused.stats[key]) == int(looped.stats[key])
+    for key in ("x", "v"):
+        np.testing.assert_allclose(fused.ys[key], looped.ys[key], rtol=0, atol=1e-12)
+    t = jnp.linspace(0.0, 6.0, 301)  # the dense output (increments either way)
+    np.testing.assert_allclose(jax.vmap(fused.evaluate)(t)["x"],
+                               jax.vmap(looped.evaluate)(t)["x"], rtol=0, atol=1e-12)
+    # a reverse-mode derivative through the written-out stages is the looped one's
+    def final(solver, v0):
+        y0 = {"x": Y0["x"], "v": Y0["v"].at[1].set(v0)}
+        return diffrax.diffeqsolve(term, solver, 0.0, 2.0, 0.1, y0,
+                                   stepsize_controller=diffrax.PIDController(rtol=1e-9,
+                                                                             atol=1e-11),
+                                   ).ys["x"][-1, 0]
+    v0 = Y0["v"][1]
+    np.testing.assert_allclose(jax.grad(lambda v: final(TightDop853(), v))(v0),
+                               jax.grad(lambda v: final(TightDop853(fuse_below=0), v))(v0),
+                               rtol=1e-9)
+
+
+@pytest.mark.parametrize("fuse_below", [-1, 1.5, True, "300"])
+def test_tight_dop853_refuses_a_fuse_below_that_is_not_a_count(fuse_below):
+    with pytest.raises(ValueError, match="fuse_below must be an int"):
+        TightDop853(fuse_below=fuse_below)
+
+
 @pytest.mark.parametrize("factor", [0.0, -1.0, float("nan"), True, "10"])
 def test_tight_dop853_refuses_a_factor_that_is_not_a_positive_number(factor):
     with pytest.raises(ValueError, match="factor must be a number > 0"):
@@ -223,12 +258,16 @@ def test_dense_stages_only_where_an_output_time_falls():
             interp = lazy.interpolation_cls(t0=t0, t1=t1, **got[2])
             np.testing.assert_array_equal(interp.evaluate(t0), y0)
     ts = jnp.linspace(0.0, 3.0, 7)
-    for solver in (eager, TightDop853().at_outputs(ts)):
-        sol = diffrax.diffeqsolve(term, solver, 0.0, 3.0, None, y0, saveat=diffrax.SaveAt(ts=ts),
-                                  stepsize_controller=diffrax.PIDController(rtol=1e-9, atol=1e-9))
-        if solver is eager:
-            ref = sol.ys
-    np.testing.assert_array_equal(sol.ys, ref)
+    for fuse_below in (0, 300):  # diffrax's stage loop: bit for bit; written out: rounding
+        ys = []
+        for solver in (TightDop853(fuse_below=fuse_below),
+                       TightDop853(fuse_below=fuse_below).at_outputs(ts)):
+            sol = diffrax.diffeqsolve(term, solver, 0.0, 3.0, None, y0,
+                                      saveat=diffrax.SaveAt(ts=ts),
+                                      stepsize_controller=diffrax.PIDController(rtol=1e-9,
+                                                                                atol=1e-9))
+            ys.append(sol.ys)
+        np.testing.assert_allclose(ys[1], ys[0], rtol=0, atol=0 if fuse_below == 0 else 1e-13)
     for wrong in (jnp.array(1.0), jnp.ones((2, 3))):
         with pytest.raises(ValueError, match="output times must have shape"):
             TightDop853().at_outputs(wrong)

@@ -1,5 +1,6 @@
-"""DOP853 on diffrax's generic Runge–Kutta step, with a conservative error estimate: the
-default solver of :func:`jrigid.simulate`."""
+"""DOP853 with a conservative error estimate, its stages written out for a small vector
+field and in diffrax's generic Runge–Kutta step otherwise: the default solver of
+:func:`jrigid.simulate`."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ import dataclasses
 from typing import ClassVar
 
 import diffrax
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -30,8 +32,8 @@ def _tensordot(row, k):
 
 
 class TightDop853(diffrax.AbstractERK):
-    """Hairer's DOP853 (the pair of scipy's ``solve_ivp(method="DOP853")``) on diffrax's
-    own Runge–Kutta step, with its error estimate times :attr:`factor`.
+    """Hairer's DOP853 (the pair of scipy's ``solve_ivp(method="DOP853")``) as a diffrax
+    Runge–Kutta solver, with its error estimate times :attr:`factor`.
 
     An 8th-order step of 12 stages and the first-same-as-last one; the error estimate
     combines a 5th- and a 3rd-order one as DOP853 does; three more stages per step give
@@ -43,26 +45,39 @@ class TightDop853(diffrax.AbstractERK):
     at ``rtol / factor`` and ``atol / factor``: with it the tolerances bound the error of
     the result over long runs, not of one step. Plain DOP853 (``factor=1``) ended up to
     130·rtol from the exact motion of a heavy top over 100 time units; ``factor = 10``
-    costs ``10^(1/8) ≈ 1.33×`` the steps. The stages are evaluated in diffrax's stage loop
-    (one compiled vector field) rather than written out as in
-    :class:`~jrigid.solvers.FusedDop853`: on the flat state the step costs about the
-    same, and the program compiles in a fraction of the time.
+    costs ``10^(1/8) ≈ 1.33×`` the steps.
+
+    **How the stages are evaluated.** For a small vector field (fewer than
+    :attr:`fuse_below` equations in its traced program: a torque-free rotor's
+    quaternion-acceleration field has about 200, a heavy top's 550) the step's stages are
+    written out as in :class:`~jrigid.solvers.FusedDop853`, constants folded and zero
+    coefficients skipped; otherwise they run in diffrax's stage loop, one compiled field.
+    The two take the same steps (up to rounding). Written out, a step of a free rotor cost
+    6–13 % less (``benchmarks/speed_vs_error.py``) for 0.7 s more compilation (1.5 →
+    2.2 s); on the heavy top it saved 4–7 % for 1.6 s more (2.3 → 3.9 s), which the
+    threshold keeps out.
 
     Attributes:
         factor: the scale of the error estimate (``> 0``; 1 is scipy's DOP853 estimate).
         output_ts: ``None`` (the dense output's stages in every step), or the output
             times of a solve that only saves at them (see :meth:`at_outputs`).
+        fuse_below: write the stages out for a vector field of fewer traced equations
+            than this (0: never).
     """
 
     tableau: ClassVar[diffrax.ButcherTableau] = _dop853_tableau()
     interpolation_cls: ClassVar = _Dop853Increments
     factor: float = 10.0
     output_ts: jax.Array | None = None
+    fuse_below: int = eqx.field(static=True, default=300)
 
     def __check_init__(self):
         ok = isinstance(self.factor, (int, float)) and not isinstance(self.factor, bool)
         if not (ok and self.factor > 0):
             raise ValueError(f"TightDop853 factor must be a number > 0, got {self.factor!r}")
+        n = self.fuse_below
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
+            raise ValueError(f"TightDop853 fuse_below must be an int >= 0, got {n!r}")
 
     def order(self, terms):
         return 8
@@ -83,13 +98,33 @@ class TightDop853(diffrax.AbstractERK):
             raise ValueError(f"output times must have shape (T,), got {jnp.shape(ts)}")
         return dataclasses.replace(self, output_ts=jnp.asarray(ts))
 
+    def fused(self, terms, t0, y0, args) -> bool:
+        """Whether the stages are written out for this vector field (decided when traced)."""
+        if self.fuse_below <= 0:
+            return False
+        program, _, _ = eqx.filter_make_jaxpr(lambda t, y, a: terms.vf(t, y, a))(t0, y0, args)
+        return _size(program.jaxpr) < self.fuse_below
+
+    def init(self, terms, t0, t1, y0, args):
+        if self.fused(terms, t0, y0, args):
+            return _FUSED.init(terms, t0, t1, y0, args)
+        return super().init(terms, t0, t1, y0, args)
+
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
-        y1, e5, dense_info, solver_state, result = super().step(
-            terms, t0, t1, y0, args, solver_state, made_jump
-        )
-        k = dense_info["k"]  # the 13 stage increments h f(tᵢ, yᵢ), leading axis
-        e3 = jax.tree_util.tree_map(lambda a: _tensordot(_dop853.E3, a), k)
-        y_error = jax.tree_util.tree_map(lambda a: self.factor * a, _dop853_error(e5, e3))
+        if self.fused(terms, t0, y0, args):
+            y1, y_error, dense_info, solver_state, result = _FUSED.step(
+                terms, t0, t1, y0, args, solver_state, made_jump
+            )
+            h = t1 - t0
+            k = jax.tree_util.tree_map(lambda f: (h * f).astype(f.dtype), dense_info["f"])
+        else:
+            y1, e5, dense_info, solver_state, result = super().step(
+                terms, t0, t1, y0, args, solver_state, made_jump
+            )
+            k = dense_info["k"]  # the 13 stage increments h f(tᵢ, yᵢ), leading axis
+            e3 = jax.tree_util.tree_map(lambda a: _tensordot(_dop853.E3, a), k)
+            y_error = _dop853_error(e5, e3)
+        y_error = jax.tree_util.tree_map(lambda a: self.factor * a, y_error)
         k = jax.tree_util.tree_map(
             lambda a: jnp.concatenate([a, jnp.zeros((_EXTRA,) + a.shape[1:], a.dtype)]), k
         )
@@ -105,6 +140,28 @@ class TightDop853(diffrax.AbstractERK):
             inside = (i < ts.shape[0]) & (ts[jnp.minimum(i, ts.shape[0] - 1)] <= t1)
             k = jax.lax.cond(inside, dense_stages, lambda k: k, k)
         return y1, y_error, dict(y0=y0, y1=y1, f=k), solver_state, result
+
+
+class _FusedStages(FusedDop853):
+    """DOP853's step with its stages written out, without the dense output's stages
+    (:class:`TightDop853` adds them where needed)."""
+
+    extra_stages: ClassVar[tuple] = ()
+
+
+_FUSED = _FusedStages()
+
+
+def _size(program) -> int:
+    """The number of equations of a jaxpr, those of its inner jaxprs included."""
+    total = 0
+    for eqn in program.eqns:
+        total += 1
+        for param in eqn.params.values():
+            inner = getattr(param, "jaxpr", param)
+            if hasattr(inner, "eqns"):
+                total += _size(inner)
+    return total
 
 
 _EXTRA = len(FusedDop853.extra_stages)
