@@ -66,10 +66,6 @@ __all__ = [
 ]
 
 
-def _pure(v: jax.Array) -> jax.Array:
-    return jnp.concatenate([jnp.zeros(1, v.dtype), v])
-
-
 def _translation_rates(scene: Scene, v, force):
     if not scene.translates:
         return None, None
