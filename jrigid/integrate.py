@@ -1,8 +1,8 @@
 """Adaptive integration of a scene with diffrax: :func:`simulate`.
 
 One entry point, :func:`simulate`, over :func:`diffrax.diffeqsolve`. The default is
-Euler's equations in quaternion-acceleration form (17.50) with Hairer's DOP853 pair as a
-diffrax Runge–Kutta solver (:class:`jrigid.solvers.TightDop853`: its error estimate
+Euler's equations in quaternion-acceleration form (17.50) with Hairer's DOP853 pair on
+diffrax's Runge–Kutta step (:class:`jrigid.solvers.TightDop853`: its error estimate
 scaled by 10, so that the tolerances bound the error of the result over long runs, and
 an accurate 7th-order dense output), on the state raveled into one array, under a PID
 controller, and after every step

@@ -38,7 +38,7 @@ __all__ = [
 
 
 #: The solver of :func:`jrigid.simulate` and the other integrators when none is given
-#: (a class, instantiated per call): DOP853, its error
+#: (a class, instantiated per call): DOP853 on diffrax's generic step, its error
 #: estimate scaled by 10 (:class:`jrigid.solvers.TightDop853`). Measured against the
 #: Tsitouras 5(4) pair on the same form (``benchmarks/speed_vs_error.py``, free rotors
 #: and a heavy top): 0.98–3.1× as fast at equal error from 1e-6 to 1e-10 (0.69–1.6× at

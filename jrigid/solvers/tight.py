@@ -1,6 +1,5 @@
-"""DOP853 with a conservative error estimate, its stages written out for a small vector
-field and in diffrax's generic Runge–Kutta step otherwise: the default solver of
-:func:`jrigid.simulate`."""
+"""DOP853 with a conservative error estimate on diffrax's generic Runge–Kutta step (its
+stages optionally written out): the default solver of :func:`jrigid.simulate`."""
 
 from __future__ import annotations
 
@@ -47,29 +46,31 @@ class TightDop853(diffrax.AbstractERK):
     130·rtol from the exact motion of a heavy top over 100 time units; ``factor = 10``
     costs ``10^(1/8) ≈ 1.33×`` the steps.
 
-    **How the stages are evaluated.** For a small vector field (fewer than
-    :attr:`fuse_below` equations in its traced program: a torque-free rotor's
-    quaternion-acceleration field has about 200, a heavy top's 550) the step's stages are
-    written out as in :class:`~jrigid.solvers.FusedDop853`, constants folded and zero
-    coefficients skipped; otherwise they run in diffrax's stage loop, one compiled field.
-    The two take the same steps (up to rounding). Written out, a step of a free rotor cost
-    6–13 % less (``benchmarks/speed_vs_error.py``) for 0.7 s more compilation (1.5 →
-    2.2 s); on the heavy top it saved 4–7 % for 1.6 s more (2.3 → 3.9 s), which the
-    threshold keeps out.
+    **How the stages are evaluated.** By default in diffrax's stage loop, one compiled
+    vector field. With ``fuse_below = n > 0``, for a vector field of fewer than ``n``
+    equations in its traced program (a torque-free rotor's quaternion-acceleration field
+    has about 200, a heavy top's 550), the stages are written out as in
+    :class:`~jrigid.solvers.FusedDop853`, constants folded and zero coefficients skipped.
+    The two take the same steps (up to rounding). Written out, a free rotor's solve took
+    6–13 % less time after compilation (``benchmarks/speed_vs_error.py``) but compiled
+    0.9–1.2 s longer: 1.5 → 2.4 s saving the two ends, 3.2 → 4.4 s saving 11–1001 times
+    (``benchmarks/outputs.py``); on the heavy top it saved 4–7 % for 1.6 s more. For
+    many calls of one compiled solve (a sweep, a fit) ``fuse_below=300`` pays; for a
+    script's first call it does not, so it is not the default.
 
     Attributes:
         factor: the scale of the error estimate (``> 0``; 1 is scipy's DOP853 estimate).
         output_ts: ``None`` (the dense output's stages in every step), or the output
             times of a solve that only saves at them (see :meth:`at_outputs`).
         fuse_below: write the stages out for a vector field of fewer traced equations
-            than this (0: never).
+            than this (0, the default: never).
     """
 
     tableau: ClassVar[diffrax.ButcherTableau] = _dop853_tableau()
     interpolation_cls: ClassVar = _Dop853Increments
     factor: float = 10.0
     output_ts: jax.Array | None = None
-    fuse_below: int = eqx.field(static=True, default=300)
+    fuse_below: int = eqx.field(static=True, default=0)
 
     def __check_init__(self):
         ok = isinstance(self.factor, (int, float)) and not isinstance(self.factor, bool)
