@@ -73,6 +73,12 @@ def check_shape(x, name: str, *trailing: tuple[int, ...], why: str = "") -> jax.
     raise ValueError(f"{name} must have shape {expected}{why}; got shape {x.shape}")
 
 
+def all_arrays(*trees) -> bool:
+    """True if every leaf of the arguments is an array (what ``jax.jit`` accepts as an
+    argument; ``equinox.filter_jit`` takes the other leaves, such as a string, as static)."""
+    return all(eqx.is_array(x) for x in jax.tree_util.tree_leaves(trees))
+
+
 def is_traced(*trees) -> bool:
     """True if any leaf of the arguments is a JAX tracer (inside jit, vmap, grad, ...)."""
     return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(trees))

@@ -62,6 +62,7 @@ import jax.numpy as jnp
 from jax.typing import ArrayLike
 
 from jrigid import closed_form, splitting, trajectory
+from jrigid._checks import all_arrays
 from jrigid._dispatch import one_kernel
 from jrigid.formulations import AbstractFormulation, check_scene, get_formulation
 from jrigid.invariants import Invariants
@@ -152,8 +153,8 @@ def _solve(scene, state, ts, rtol, atol, *options):
         try:
             traj, cause = compiled.fn(scene, state, ts, rtol, atol)
             messages = _Messages(compiled.messages, (scene, state))
-        except TypeError as error:
-            if "not a valid JAX type" not in str(error):
+        except TypeError:
+            if all_arrays(scene, state, ts, rtol, atol):
                 raise
     if traj is None:
         traj, cause, messages = _filter_solve(scene, state, ts, rtol, atol, *options)

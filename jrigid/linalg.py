@@ -80,7 +80,13 @@ def euler_diagonal(moments: jax.Array, omega: jax.Array, torque: jax.Array) -> j
 
     Returns:
         ``(..., 3)`` body angular acceleration; batch shapes broadcast.
+
+    Raises:
+        ValueError: an argument whose last axis is not of length 3.
     """
+    for name, a in (("moments", moments), ("omega", omega), ("torque", torque)):
+        if jnp.shape(a)[-1:] != (3,):
+            raise ValueError(f"euler_diagonal: {name} must have shape (..., 3), got {jnp.shape(a)}")
     moments, omega, torque = jnp.broadcast_arrays(moments, omega, torque)
     i1, i2, i3 = moments[..., 0], moments[..., 1], moments[..., 2]
     w1, w2, w3 = omega[..., 0], omega[..., 1], omega[..., 2]

@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 
 from jrigid import quaternion as quat
+from jrigid._checks import all_arrays
 from jrigid.formulations import AbstractFormulation
 from jrigid.scene import Scene
 
@@ -146,8 +147,8 @@ def _evaluate(name, traj):
     args = (name, traj.formulation, traj.scene, traj.y, jnp.ndim(traj.result))
     try:
         return _COMPILED[0](*args)
-    except TypeError as error:
-        if "not a valid JAX type" not in str(error):
+    except TypeError:  # jax.jit refuses a leaf that is not an array (a string parameter)
+        if all_arrays(traj.scene):
             raise
         return _COMPILED[1](*args)
 

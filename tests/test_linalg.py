@@ -2,6 +2,7 @@
 
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 from jrigid import linalg
 
@@ -61,3 +62,9 @@ def test_euler_diagonal_matches_the_vector_form_of_eulers_equations():
     got = linalg.euler_diagonal(jnp.asarray(moments), jnp.asarray(omega), jnp.asarray(torque))
     assert got.shape == (4, 2, 3)
     np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-14)
+
+
+def test_euler_diagonal_names_a_wrongly_shaped_argument():
+    three = jnp.ones(3)
+    with pytest.raises(ValueError, match="omega must have shape"):
+        linalg.euler_diagonal(three, jnp.ones(4), three)

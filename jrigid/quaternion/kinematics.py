@@ -132,18 +132,7 @@ def angular_velocity(q: ArrayLike, qdot: ArrayLike) -> jax.Array:
     Returns:
         ``(..., 3)`` body-frame angular velocity.
     """
-    q, qdot = as_float_pair(quaternion_arg(q), quaternion_arg(qdot, "qdot"))
-    q, qdot = broadcast_batch(q, 1, qdot, 1)
-    q0, q1, q2, q3 = (q[..., i] for i in range(4))
-    d0, d1, d2, d3 = (qdot[..., i] for i in range(4))
-    return 2.0 * jnp.stack(
-        [
-            q0 * d1 - q1 * d0 - q2 * d3 + q3 * d2,
-            q0 * d2 + q1 * d3 - q2 * d0 - q3 * d1,
-            q0 * d3 - q1 * d2 + q2 * d1 - q3 * d0,
-        ],
-        axis=-1,
-    )
+    return 2.0 * multiply(conjugate(q), quaternion_arg(qdot, "qdot"))[..., 1:]
 
 
 def angular_velocity_space(q: ArrayLike, qdot: ArrayLike) -> jax.Array:
