@@ -138,23 +138,30 @@ class ProjectedSolver(WrappedSolver):
         """The saved states ``ys`` (leading axis: the saved times) projected the same way.
 
         Outputs between steps are interpolated, so they are projected after the solve,
-        all at once. (Projecting them in diffrax's ``SaveAt`` function instead compiles
-        the projection into the loop a second time: it made the default free-rotor
-        program a third larger, 18.6k against 13.8k lines of optimised HLO.) Slots that
-        are not finite (unfilled after a failure, or a diverged state) are returned
-        unchanged; ``y0`` stands in for them inside the projection, so that its derivative
-        stays finite. A batched formulation's slot counts as one: any non-finite member
-        leaves it unprojected.
+        one at a time in a loop. (As one batched (``vmap``) projection it ran faster,
+        17 µs against 58 µs for 1001 outputs of a free rotor, but compiled 0.45 s longer
+        — 2.2 s against 1.7 s — because XLA:CPU generates a vectorised loop for each of
+        its operations. Projecting in diffrax's ``SaveAt`` function instead compiles the
+        projection into the loop a second time.) Slots that are not finite (unfilled
+        after a failure, or a diverged state) are returned unchanged; ``y0`` stands in
+        for them inside the projection, so that its derivative stays finite. A batched
+        formulation's slot counts as one: any non-finite member leaves it unprojected.
         """
+        tree_map = jax.tree_util.tree_map
 
         def one(y):
             finite = jnp.all(jnp.stack([jnp.all(jnp.isfinite(a))
                                         for a in jax.tree_util.tree_leaves(y)]))
-            safe = jax.tree_util.tree_map(lambda a, b: jnp.where(finite, a, b), y, y0)
+            safe = tree_map(lambda a, b: jnp.where(finite, a, b), y, y0)
             done = self.formulation.project(safe, args, self.invariants)
-            return jax.tree_util.tree_map(lambda a, b: jnp.where(finite, a, b), done, y)
+            return tree_map(lambda a, b: jnp.where(finite, a, b), done, y)
 
-        return jax.vmap(one)(ys)
+        def body(i, ys):
+            y = one(tree_map(lambda a: a[i], ys))
+            return tree_map(lambda a, b: a.at[i].set(b), ys, y)
+
+        n = jax.tree_util.tree_leaves(ys)[0].shape[0]
+        return jax.lax.fori_loop(0, n, body, ys)
 
 
 def interpolating_at(solver, ts):
