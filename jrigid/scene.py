@@ -43,6 +43,7 @@ __all__ = [
     "Gravity",
     "Pivot",
     "Scene",
+    "TopConstants",
     "Torque",
 ]
 
@@ -234,6 +235,48 @@ class Conserved(NamedTuple):
     active: jax.Array
 
 
+class TopConstants(eqx.Module):
+    """What a conservative top's invariants (:meth:`Scene.conserved`) need of its scene.
+
+    Attributes:
+        tensor: ``(3, 3)`` inertia ``I_p`` about the pivot, body frame.
+        g_hat: ``(3,)`` direction of gravity (space frame).
+        lever_weight: ``(3,)`` ``M |g| r`` (``r`` the centre of mass from the pivot).
+        r_hat: ``(3,)`` ``r / |r|`` (zero without a lever arm).
+        weight: ``()`` ``M |g| |r|``.
+        momentum_floor: ``()`` ``√(I_max M |g| |r|)``, a top's momentum scale at rest.
+        pendulum2: ``()`` ``M |g| |r| / I_max``, its pendulum frequency squared.
+        symmetric: ``()`` bool, :meth:`Scene.symmetric_about_lever`.
+    """
+
+    tensor: jax.Array
+    g_hat: jax.Array
+    lever_weight: jax.Array
+    r_hat: jax.Array
+    weight: jax.Array
+    momentum_floor: jax.Array
+    pendulum2: jax.Array
+    symmetric: jax.Array
+
+    def conserved(self, q: jax.Array, omega: jax.Array) -> Conserved:
+        """:meth:`Scene.conserved` of the top at unit ``q (4,)`` and body ``omega (3,)``.
+
+        Written with reductions over whole vectors (few operations, quick to compile:
+        a projection evaluates it at every step).
+        """
+        dtype = omega.dtype
+        L = jnp.sum(self.tensor * omega[None, :], axis=-1)
+        g_body = quat.rotate_inverse(q, self.g_hat)
+        kinetic = 0.5 * jnp.sum(omega * L)
+        potential = -jnp.sum(g_body * self.lever_weight)  # −M g·(R r)
+        momentum = jnp.sqrt(jnp.sum(L * L)) + self.momentum_floor
+        values = jnp.stack([kinetic + potential, jnp.sum(L * g_body), jnp.sum(L * self.r_hat),
+                            jnp.zeros((), dtype)])
+        scales = jnp.stack([kinetic + self.weight, momentum, momentum, jnp.ones((), dtype)])
+        active = jnp.stack([jnp.array(True), jnp.array(True), self.symmetric, jnp.array(False)])
+        return Conserved(values, scales, active)
+
+
 class Scene(eqx.Module):
     """One body, how it is held, and what acts on it.
 
@@ -308,7 +351,6 @@ class Scene(eqx.Module):
             kin: one state's :class:`~jrigid.state.Kinematics` (``q`` unit).
         """
         omega = kin.omega
-        dtype = omega.dtype
         if self.torque_free:
             m = self.body.moments
             L = m * omega
@@ -322,29 +364,37 @@ class Scene(eqx.Module):
             return Conserved(jnp.stack([L2, *deltas]), jnp.full(4, L2), active)
         if not self.conservative_top:
             return None
-        L = self.angular_momentum(omega)
+        return self.top_constants().conserved(kin.q, omega)
+
+    def top_constants(self) -> TopConstants:
+        """The parts of a conservative top's invariants that do not change along its
+        motion (:class:`TopConstants`), for :meth:`conserved` and for projections that
+        evaluate the invariants at every step (computed once per solve).
+
+        Raises:
+            ValueError: the scene is not a :attr:`conservative_top`.
+        """
+        if not self.conservative_top:
+            raise ValueError("top_constants: the scene is not a body on a Pivot under Gravity only")
+        dtype = jnp.result_type(self.body.moments)
+        tensor = self.inertia()
         g = sum((load.g for load in self.loads), jnp.zeros(3, dtype))
         g_norm = jnp.sqrt(linalg.dot(g, g))
-        g_hat = g / g_norm
-        kinetic = self.kinetic_energy(omega)
-        potential = self.potential_energy(kin)
         r = self.body.com
         r_norm = jnp.sqrt(linalg.dot(r, r))
         r_hat = r / jnp.where(r_norm > 0, r_norm, 1.0)
-        # Scales: the sizes of the terms that make up each invariant; at rest a top's
-        # momentum scale is I ν_g with ν_g² = M |g| |r| / I (its pendulum frequency).
         weight = self.body.mass * g_norm * r_norm
-        inertia = jnp.max(jnp.diagonal(self.inertia()))
-        momentum = jnp.sqrt(linalg.dot(L, L)) + jnp.sqrt(inertia * weight)
-        values = jnp.stack(
-            [kinetic + potential, linalg.dot(quat.rotate(kin.q, L), g_hat), linalg.dot(L, r_hat),
-             jnp.zeros((), dtype)]
+        largest = jnp.max(jnp.diagonal(tensor))
+        return TopConstants(
+            tensor=tensor,
+            g_hat=g / g_norm,
+            lever_weight=self.body.mass * g_norm * r,
+            r_hat=r_hat,
+            weight=weight,
+            momentum_floor=jnp.sqrt(largest * weight),
+            pendulum2=weight / largest,
+            symmetric=self.symmetric_about_lever(),
         )
-        scales = jnp.stack([kinetic + weight, momentum, momentum, jnp.ones((), dtype)])
-        active = jnp.stack(
-            [jnp.array(True), jnp.array(True), self.symmetric_about_lever(), jnp.array(False)]
-        )
-        return Conserved(values, scales, active)
 
     def symmetric_about_lever(self) -> jax.Array:
         """``()`` bool: the body is symmetric about the pivot–centre-of-mass line.

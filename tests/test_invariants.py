@@ -69,10 +69,10 @@ def test_top_gradients_match_autodiff(scene):
         return scene.conserved(Kinematics(rotate_body(Q, u[:3]), OMEGA + u[3:])).values[:3]
 
     jac = jax.jacfwd(values)(jnp.zeros(6))
-    rows = top_gradients(scene, Q, OMEGA)
-    for i, (d_theta, d_omega) in enumerate(rows):
-        np.testing.assert_allclose(jac[i, :3], d_theta, rtol=1e-12, atol=1e-14)
-        np.testing.assert_allclose(jac[i, 3:], d_omega, rtol=1e-12, atol=1e-14)
+    d_theta, d_omega = top_gradients(scene, Q, OMEGA)
+    assert d_theta.shape == d_omega.shape == (3, 3)
+    np.testing.assert_allclose(jac[:, :3], d_theta, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(jac[:, 3:], d_omega, rtol=1e-12, atol=1e-14)
 
 
 @pytest.mark.parametrize(
