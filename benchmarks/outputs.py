@@ -5,6 +5,9 @@ t = 0…100, float64), for ``T`` = 2, 11, 101 and 1001 evenly spaced output time
 
 * ``simulate`` with its defaults (rtol 1e-8, atol 1e-10), jitted, returning ``q``;
 * the same call without ``jit`` (what a script does in a loop), reading ``q``;
+  both are timed twice: interleaved with the other calls (batches of at most 8 calls of
+  each, in turn), and in a loop of their own (runs of up to 30 back-to-back calls, the
+  two alternating), which is what a script's loop does;
 * a hand-written ``diffrax.diffeqsolve`` of ``(q, ω)`` (``Problem.jax_rhs``) with Dopri8,
   diffrax's ``PIDController`` and ``SaveAt(ts=...)``, jitted, at the same tolerances and at
   rtol 1e-9 / atol 1e-11, where its final error is about the default's at 1e-8.
@@ -26,6 +29,8 @@ import harness
 COUNTS = (2, 11, 101, 1001)
 RTOL, ATOL = 1e-8, 1e-10
 HAND_TIGHT = (1e-9, 1e-11)  # the hand-written call's tolerances at about the default's error
+JITTED, PLAIN = "jrigid default, jitted", "jrigid default, plain call"
+LOOP_JIT, LOOP_PLAIN = f"{JITTED}, in a loop", f"{PLAIN}, in a loop"
 
 
 def calls(problem, T: int):
@@ -61,8 +66,8 @@ def calls(problem, T: int):
     tight = tuple(jnp.asarray(x) for x in HAND_TIGHT)
     _, hand_seconds = harness.warm_jit(hand_jit, y0, ts, *loose)
     return {
-        "jrigid default, jitted": (lambda: jitted(scene, state, ts), seconds),
-        "jrigid default, plain call": (plain, None),
+        JITTED: (lambda: jitted(scene, state, ts), seconds),
+        PLAIN: (plain, None),
         f"hand-written diffrax Dopri8, rtol {RTOL:g}": (lambda: hand_jit(y0, ts, *loose),
                                                         hand_seconds),
         f"hand-written diffrax Dopri8, rtol {HAND_TIGHT[0]:g}": (
@@ -88,6 +93,14 @@ def main(argv=None) -> dict:
         entries = calls(problem, T)
         timed = harness.time_interleaved({k: c for k, (c, _) in entries.items()},
                                          20 if args.quick else 100, min_time=0.2)
+        # A script's loop: the plain call and the jitted one, each in runs of up to 30
+        # back-to-back calls (above, the batches of 8 or fewer alternate with the other
+        # compiled calls, and the first one or two calls of a batch find cold caches).
+        looped = harness.time_interleaved(
+            {LOOP_JIT: entries[JITTED][0], LOOP_PLAIN: entries[PLAIN][0]},
+            5 if args.quick else 10, min_time=0.3, max_inner=30)
+        timed.update(looped)
+        entries.update({LOOP_JIT: (None, None), LOOP_PLAIN: (None, None)})
         for label, (timing, out) in timed.items():
             q, w = (np.asarray(a)[-1] for a in out)
             error = max(harness.omega_error(w, ref["omega"]), harness.quaternion_error(q, ref["q"]))

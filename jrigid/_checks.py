@@ -13,6 +13,7 @@ from collections.abc import Callable
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax.typing import ArrayLike
 
 
@@ -77,6 +78,12 @@ def all_arrays(*trees) -> bool:
     """True if every leaf of the arguments is an array (what ``jax.jit`` accepts as an
     argument; ``equinox.filter_jit`` takes the other leaves, such as a string, as static)."""
     return all(eqx.is_array(x) for x in jax.tree_util.tree_leaves(trees))
+
+
+def float_dtype() -> np.dtype:
+    """JAX's default floating dtype: ``float64`` with ``jax_enable_x64``, else ``float32``
+    (what ``jnp.result_type(float)`` returns, in a tenth of its time)."""
+    return np.dtype(np.float64 if jax.config.jax_enable_x64 else np.float32)
 
 
 def is_traced(*trees) -> bool:

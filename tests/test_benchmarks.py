@@ -160,12 +160,14 @@ def test_outputs_quick_run_times_every_call_and_measures_its_error(tmp_path):
     md = (tmp_path / "outputs_quick.md").read_text()
     assert "Machine: " in md and "| T | call |" in md
     rows = json.loads((tmp_path / "outputs_quick.json").read_text())["rows"]
-    assert {r["T"] for r in rows} == {2, 101} and len(rows) == 8
+    assert {r["T"] for r in rows} == {2, 101} and len(rows) == 12
     assert all(r["median"] > 0 and math.isfinite(r["error"]) for r in rows)
     by = {(r["T"], r["method"]): r for r in rows}
     for T in (2, 101):
         jitted, plain = by[T, "jrigid default, jitted"], by[T, "jrigid default, plain call"]
         assert jitted["error"] == pytest.approx(plain["error"], rel=1e-6)  # the same solve
+        for label in (outputs.LOOP_JIT, outputs.LOOP_PLAIN):  # timed again, in a loop
+            assert by[T, label]["error"] == pytest.approx(plain["error"], rel=1e-6)
         # at equal tolerance the hand-written Dopri8 is far less accurate (no projection,
         # diffrax's per-entry error scale): what the table's tighter row is for
         loose = by[T, f"hand-written diffrax Dopri8, rtol {outputs.RTOL:g}"]

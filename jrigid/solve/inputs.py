@@ -102,9 +102,11 @@ def prepare(scene: Scene, state: State, ts, rtol, atol, dtype):
         raise ValueError(
             f"initial_state must be a jrigid State (see jrigid.initial), got {type(state).__name__}"
         )
-    if scene.translates and (state.x is None or state.v is None):
+    q, qdot, x, v = state.q, state.qdot, state.x, state.v  # (module fields: slow to read)
+    translates = scene.translates
+    if translates and (x is None or v is None):
         raise ValueError("a FreeFlight scene needs x and v in the initial state")
-    if not scene.translates and (state.x is not None or state.v is not None):
+    if not translates and (x is not None or v is not None):
         raise ValueError("x and v are only for FreeFlight scenes; this scene does not translate")
     ts = _converted(ts, dtype, "ts")
     if ts.ndim != 1 or ts.shape[0] < 2:
@@ -112,13 +114,12 @@ def prepare(scene: Scene, state: State, ts, rtol, atol, dtype):
     rtol = _default_array(dtype, 0) if rtol is None else _as(rtol, dtype, "rtol", ())
     atol = _default_array(dtype, 1) if atol is None else _as(atol, dtype, "atol", ())
     fields = (
-        _as(state.q, dtype, "initial_state.q", (4,)),
-        _as(state.qdot, dtype, "initial_state.qdot", (4,)),
-        None if state.x is None else _as(state.x, dtype, "initial_state.x", (3,)),
-        None if state.v is None else _as(state.v, dtype, "initial_state.v", (3,)),
+        _as(q, dtype, "initial_state.q", (4,)),
+        _as(qdot, dtype, "initial_state.qdot", (4,)),
+        None if x is None else _as(x, dtype, "initial_state.x", (3,)),
+        None if v is None else _as(v, dtype, "initial_state.v", (3,)),
     )
-    if any(new is not old for new, old in zip(fields, (state.q, state.qdot, state.x, state.v),
-                                              strict=True)):
+    if fields[0] is not q or fields[1] is not qdot or fields[2] is not x or fields[3] is not v:
         state = State(*fields)
     return state, ts, rtol, atol
 
