@@ -179,6 +179,35 @@ def test_tolerance_change_does_not_recompile(caplog):
     assert not [r for r in caplog.records if "Compiling" in r.message and "_solve" in r.message]
 
 
+def test_equal_options_share_one_compiled_solve_and_different_ones_do_not():
+    from jrigid import integrate
+    from jrigid.solvers import TightDop853
+
+    state = initial.from_omega(Q0, OMEGA0)
+    simulate(free_scene(), state, TS)
+    count = integrate._compiled_by_value.cache_info().currsize
+    # an equal solver object that is not the default instance: found by value
+    simulate(free_scene(), state, TS, solver=TightDop853())
+    assert integrate._compiled_by_value.cache_info().currsize == count
+    # a different one: a compiled solve of its own, and the results differ accordingly
+    a = simulate(free_scene(), state, TS, solver=TightDop853(factor=1.0))
+    assert integrate._compiled_by_value.cache_info().currsize == count + 1
+    b = simulate(free_scene(), state, TS, solver=TightDop853(factor=10.0))
+    assert int(a.stats["num_steps"]) < int(b.stats["num_steps"])
+
+
+def test_float_dtype_is_jax_default_float():
+    from jrigid._checks import float_dtype
+
+    assert float_dtype() == jnp.result_type(float) == jnp.float64
+
+
+def test_float_dtype_follows_x64_off(float32):
+    from jrigid._checks import float_dtype
+
+    assert float_dtype() == jnp.result_type(float) == jnp.float32
+
+
 # --------------------------------------------------------------------------- constraints
 
 
