@@ -167,10 +167,11 @@ def top_gradients(scene: Scene, q: jax.Array, omega: jax.Array,
         top: ``scene.top_constants()``, if already at hand.
 
     Returns:
-        ``(∂θ (3, 3), ∂ω (3, 3))``: row ``i`` is the gradient of slot ``i``.
+        ``[(∂θ (3,), ∂ω (3,)), ...]`` for the three slots.
     """
     top = scene.top_constants() if top is None else top
-    return _top_rows(top, quat.rotate_inverse(q, top.g_hat), omega)
+    d_theta, d_omega = _top_rows(top, quat.rotate_inverse(q, top.g_hat), omega)
+    return [(d_theta[i], d_omega[i]) for i in range(3)]
 
 
 def _top_rows(top: TopConstants, g_body: jax.Array, omega: jax.Array):

@@ -64,15 +64,33 @@ def test_free_gradients_match_autodiff():
 
 
 @pytest.mark.parametrize("scene", [SYMMETRIC_TOP, ASYMMETRIC_TOP], ids=["symmetric", "asymmetric"])
+def test_top_invariants_are_energy_and_momenta(scene):
+    """A top's invariants against the scene's own energies and a matrix-built L_space."""
+    c = scene.conserved(Kinematics(Q, OMEGA))
+    kin = Kinematics(Q, OMEGA)
+    energy = scene.kinetic_energy(OMEGA) + scene.potential_energy(kin)
+    R = np.asarray(quat.to_matrix(Q))
+    L_body = np.asarray(scene.inertia()) @ np.asarray(OMEGA)
+    g = np.asarray(sum(load.g for load in scene.loads))
+    r = np.asarray(scene.body.com)
+    np.testing.assert_allclose(c.values[0], energy, rtol=1e-14)
+    np.testing.assert_allclose(c.values[1], (R @ L_body) @ (g / np.linalg.norm(g)), rtol=1e-13)
+    np.testing.assert_allclose(c.values[2], L_body @ (r / np.linalg.norm(r)), rtol=1e-13)
+    assert bool(c.active[2]) == bool(scene.symmetric_about_lever())
+    with pytest.raises(ValueError, match="not a body on a Pivot"):
+        FREE.top_constants()
+
+
+@pytest.mark.parametrize("scene", [SYMMETRIC_TOP, ASYMMETRIC_TOP], ids=["symmetric", "asymmetric"])
 def test_top_gradients_match_autodiff(scene):
     def values(u):
         return scene.conserved(Kinematics(rotate_body(Q, u[:3]), OMEGA + u[3:])).values[:3]
 
     jac = jax.jacfwd(values)(jnp.zeros(6))
-    d_theta, d_omega = top_gradients(scene, Q, OMEGA)
-    assert d_theta.shape == d_omega.shape == (3, 3)
-    np.testing.assert_allclose(jac[:, :3], d_theta, rtol=1e-12, atol=1e-14)
-    np.testing.assert_allclose(jac[:, 3:], d_omega, rtol=1e-12, atol=1e-14)
+    rows = top_gradients(scene, Q, OMEGA)
+    for i, (d_theta, d_omega) in enumerate(rows):
+        np.testing.assert_allclose(jac[i, :3], d_theta, rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(jac[i, 3:], d_omega, rtol=1e-12, atol=1e-14)
 
 
 @pytest.mark.parametrize(
