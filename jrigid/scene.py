@@ -259,14 +259,18 @@ class TopConstants(eqx.Module):
     symmetric: jax.Array
 
     def conserved(self, q: jax.Array, omega: jax.Array) -> Conserved:
-        """:meth:`Scene.conserved` of the top at unit ``q (4,)`` and body ``omega (3,)``.
+        """:meth:`Scene.conserved` of the top at unit ``q (4,)`` and body ``omega (3,)``."""
+        return self.conserved_at(quat.rotate_inverse(q, self.g_hat), omega)
+
+    def conserved_at(self, g_body: jax.Array, omega: jax.Array) -> Conserved:
+        """:meth:`conserved` from the body-frame direction of gravity ``g_body (3,)``
+        (``Rᵀ ĝ``) and body ``omega (3,)``.
 
         Written with reductions over whole vectors (few operations, quick to compile:
         a projection evaluates it at every step).
         """
         dtype = omega.dtype
         L = jnp.sum(self.tensor * omega[None, :], axis=-1)
-        g_body = quat.rotate_inverse(q, self.g_hat)
         kinetic = 0.5 * jnp.sum(omega * L)
         potential = -jnp.sum(g_body * self.lever_weight)  # −M g·(R r)
         momentum = jnp.sqrt(jnp.sum(L * L)) + self.momentum_floor
