@@ -13,8 +13,9 @@ Three problems, each integrated over 100 time units:
 
 Methods: **jrigid's default** (``simulate`` with no options: quaternion acceleration,
 :data:`jrigid.integrate.DEFAULT_SOLVER`, projection onto the constraints and the
-invariants); jrigid 0.1's default (the same form with diffrax's ``Tsit5`` and ``|q|``
-projection only) for comparison; in full mode other formulations and solvers; a
+invariants); jrigid 0.1's default (the same form with the chapter's literal ``q̈``,
+``QuaternionAcceleration(centripetal=True)``, diffrax's ``Tsit5`` and ``|q|`` projection
+only) for comparison; in full mode other formulations and solvers; a
 **hand-written** ``diffrax.diffeqsolve`` on the flat ``(q, ω)`` equations with ``Tsit5``
 and ``Dopri8`` (jitted, ``SaveAt(t1=True)``: what a user writing the equations by hand
 gets); and scipy ``solve_ivp`` ``DOP853`` and ``RK45`` on the same equations — body ω from
@@ -71,6 +72,7 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import harness  # noqa: E402
 from harness import Problem  # noqa: E402
 
+from jrigid.formulations import QuaternionAcceleration  # noqa: E402
 from jrigid.integrate import DEFAULT_SOLVER, simulate  # noqa: E402
 from jrigid.solvers import FusedDop853, FusedDopri8, FusedTsit5  # noqa: E402
 
@@ -277,7 +279,8 @@ def method_list(problem: Problem, *, quick: bool):
     ``hand`` specs a diffrax solver for :func:`hand_written_method`, ``scipy`` specs a
     ``solve_ivp`` method.
     """
-    old = dict(solver=diffrax.Tsit5(), project="manifold")
+    old = dict(solver=diffrax.Tsit5(), project="manifold",
+               formulation=QuaternionAcceleration(centripetal=True))
     methods = [(DEFAULT, "jrigid", {}), (OLD_DEFAULT, "jrigid", old)]
     if not quick:
         methods += [
@@ -407,8 +410,6 @@ def profile(result: dict, rtol: float) -> dict:
 
 
 def _field_and_state(problem: Problem):
-    from jrigid.formulations import QuaternionAcceleration
-
     scene, state = problem.scene(), problem.state()
     field = QuaternionAcceleration()
     return field, field.from_state(scene, state), scene

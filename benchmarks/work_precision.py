@@ -7,7 +7,8 @@ For each case of ``benchmarks/hard_cases.py`` (full size) this runs
   invariants);
 - every jrigid formulation (``quaternion_acceleration``, ``quaternion_omega``,
   ``body_omega`` where there is no torque, ``euler_angles``, each with the constraint
-  projection only: ``quaternion_acceleration + Tsit5`` is jrigid 0.1's default) × diffrax ``Tsit5``,
+  projection only: ``quaternion_acceleration + Tsit5`` is jrigid 0.1's default but for
+  its ``q̈``, see :class:`jrigid.formulations.QuaternionAcceleration`) × diffrax ``Tsit5``,
   ``Dopri5``, ``Dopri8`` over ``rtol`` = 1e-3 … 1e-12 (``atol = 1e-2 rtol``), plus the
   implicit ``Kvaerno5`` on the thin rod (lean where curves are predictable: the tops skip
   ``Dopri5``, the 10⁴-period case runs three (formulation, solver) pairs at rtol 1e-6 …

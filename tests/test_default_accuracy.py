@@ -2,9 +2,11 @@
 
 For each float64 case of ``benchmarks/hard_cases.py`` with an orientation (torque-free
 bodies, heavy tops, the published checks), the default call's final-time error (relative
-ω, sign-invariant q) against the case's closed-form reference is compared with the
-``quaternion_omega`` form at the same tolerance: within 10·rtol wherever that form is,
-and never more than twice its error or twice rtol, whichever is larger.
+ω, sign-invariant q) against the case's closed-form reference stays within rtol (measured
+with this version: at most 0.57·rtol from 1e-4 to 1e-10), and never more than twice the
+``quaternion_omega`` form's error or rtol, whichever is larger. (Twice the first-order
+form's error alone is missed where that form's ω is far more accurate than rtol: the
+nearly symmetric body, HNW and near the separatrix; ``docs/benchmarks.md``.)
 """
 
 from __future__ import annotations
@@ -44,17 +46,16 @@ def test_default_is_as_accurate_as_the_first_order_form(key):
         default = _error(simulate(prob.scene(), prob.state(), ts, **kw), ref)
         omega_form = _error(simulate(prob.scene(), prob.state(), ts,
                                      formulation="quaternion_omega", **kw), ref)
-        assert default <= max(2 * omega_form, 2 * rtol) + 2 * floor, (rtol, default, omega_form)
-        if omega_form <= 10 * rtol:
-            assert default <= 10 * rtol + 2 * floor, (rtol, default, omega_form)
+        assert default <= rtol + 2 * floor, (rtol, default, omega_form)
+        assert default <= max(2 * omega_form, rtol) + 2 * floor, (rtol, default, omega_form)
 
 
 @pytest.mark.parametrize("key", LONG)
 def test_long_horizons_stay_within_a_few_tolerances(key):
     """Over 100 periods (the long cases at small size) the phase error stays bounded by the
-    restored invariants: within 40·rtol of the closed form at every tolerance (measured:
-    4–24·rtol on the top, 2.5–3.1× the ``quaternion_omega`` form's error there, a known
-    miss of the 2× target; 4–36·rtol on the free rotor)."""
+    restored invariants: within 4·rtol of the closed form at every tolerance (measured:
+    1.0–1.1·rtol on the top, a fifth of the ``quaternion_omega`` form's error there;
+    1.4–1.6·rtol on the free rotor, 0.75–1.9× that form's)."""
     case = hc.CASES[key]
     ref = hc.reference(case, "small")
     prob = hc.problem(case, "small")
@@ -62,7 +63,7 @@ def test_long_horizons_stay_within_a_few_tolerances(key):
     for rtol in (1e-6, 1e-8, 1e-10):
         traj = simulate(prob.scene(), prob.state(), ts, rtol=rtol, atol=1e-2 * rtol,
                         max_steps=1_000_000)
-        assert _error(traj, ref) <= 40 * rtol, (rtol, _error(traj, ref))
+        assert _error(traj, ref) <= 4 * rtol, (rtol, _error(traj, ref))
 
 
 @pytest.mark.parametrize(

@@ -22,7 +22,12 @@ from scipy.spatial.transform import Rotation
 
 from jrigid import initial
 from jrigid.body import RigidBody
-from jrigid.formulations import FORMULATIONS, check_scene, get_formulation
+from jrigid.formulations import (
+    FORMULATIONS,
+    QuaternionAcceleration,
+    check_scene,
+    get_formulation,
+)
 from jrigid.integrate import simulate
 from jrigid.leapfrog import leapfrog
 from jrigid.scene import Gravity, Pivot, Scene, Torque
@@ -166,6 +171,12 @@ def test_vector_field_off_the_constraint_acts_on_the_unit_rotation(name, case, s
         y = formulation.from_state(scene, initial.from_omega(jnp.asarray(q), jnp.asarray(omega)))
         y = type(y)(s * y.q, s * y.qdot, y.x, y.v)
         dy = formulation.vector_field(0.0, y, scene)
+        # homogeneous of degree one: the unit state's q̈ = ½ q̇ ⊗ (0, ω) + ½ q ⊗ (0, ω̇), scaled
+        qddot = s * (0.5 * _hamilton(qdot, np.concatenate([[0.0], omega]))
+                     + 0.5 * _hamilton(q, np.concatenate([[0.0], expected])))
+        np.testing.assert_allclose(dy.qdot, qddot, atol=1e-12)
+        # the chapter's ½ Wᵀ (ω̇, −2 Σ q̇ₘ²): its centripetal term is cubic in the scale
+        dy = QuaternionAcceleration(centripetal=True).vector_field(0.0, y, scene)
         qddot = 0.5 * _hamilton(s * q, np.concatenate([[0.0], expected])) - s**3 * (qdot @ qdot) * q
         np.testing.assert_allclose(dy.qdot, qddot, atol=1e-12)
     else:
