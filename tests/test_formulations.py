@@ -18,6 +18,8 @@ from _simulate import (
 )
 from _simulate import free_reference as _free_reference
 from _simulate import top_reference as _top_reference
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from jrigid import initial
@@ -31,6 +33,7 @@ from jrigid.formulations import (
 from jrigid.integrate import simulate
 from jrigid.leapfrog import leapfrog
 from jrigid.scene import Gravity, Pivot, Scene, Torque
+from jrigid.state import State
 
 
 @pytest.fixture(scope="module")
@@ -153,6 +156,25 @@ def test_vector_field_is_eulers_equations(name, case):
                       dphi * np.sin(th) * np.cos(ps) - dth * np.sin(ps),
                       dphi * np.cos(th) + dps]
         np.testing.assert_allclose(from_rates, omega, atol=1e-12)
+
+
+_FINITE = st.floats(-1.0, 1.0, allow_nan=False)
+
+
+@settings(max_examples=30, deadline=None)
+@given(q=st.lists(_FINITE, min_size=4, max_size=4).filter(lambda v: np.dot(v, v) > 0.05),
+       qdot=st.lists(_FINITE, min_size=4, max_size=4), s=st.floats(0.5, 2.0),
+       case=st.sampled_from([0, 1]))
+def test_quaternion_acceleration_is_homogeneous_of_degree_one(q, qdot, s, case):
+    # Off the constraint too (any |q|, any q·q̇, as at a Runge–Kutta stage), the field at
+    # (s q, s q̇) is s times the field at (q, q̇): a stage's error in scale stays a scale
+    _, scene, _, _ = _scenes()[case]
+    field = QuaternionAcceleration()
+    y = State(jnp.asarray(q), jnp.asarray(qdot))
+    scaled = field.vector_field(0.0, State(s * y.q, s * y.qdot), scene)
+    dy = field.vector_field(0.0, y, scene)
+    np.testing.assert_allclose(scaled.q, s * dy.q, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(scaled.qdot, s * dy.qdot, rtol=1e-10, atol=1e-10)
 
 
 @pytest.mark.parametrize("s", [0.8, 1.25])
