@@ -76,7 +76,7 @@ print(f"period of ω: {float(period(eps)):.4f} s; D = {float(D):.4f} s")
 
 
 def final_q(moments, eps, D, rtol, adjoint=None):
-    """q(D) by jrigid.simulate (adaptive Tsit5, atol = rtol / 100)."""
+    """q(D) by jrigid.simulate (its default adaptive pair, atol = rtol / 100)."""
     scene = jrigid.Scene(jrigid.RigidBody(moments))
     traj = jrigid.simulate(scene, initial.from_omega(None, omega0(eps)), jnp.stack([0.0, D]),
                            rtol=rtol, atol=rtol / 100, adjoint=adjoint)

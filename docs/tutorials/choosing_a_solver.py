@@ -49,10 +49,11 @@ PERIODS = 30 if QUICK else 100
 # rotation angle between the computed and the exact orientation at the end. Three
 # configurations:
 #
-# - the default: Euler's equations in quaternion-acceleration form (17.50), Tsit5, with
-#   projection onto the constraints and invariants after every step;
-# - `formulation="quaternion_omega"` with Hairer's 8th-order DOP853 pair (fused, with its
-#   7th-order dense output);
+# - the default: Euler's equations in quaternion-acceleration form (17.50) with Hairer's
+#   8th-order DOP853 pair (`jrigid.solvers.TightDop853`), with projection onto the
+#   constraints and invariants after every step;
+# - `formulation="quaternion_omega"` with the same pair, its stages written out
+#   (`FusedDop853`), and the same projection;
 # - the exact solver.
 #
 # Tolerances are traced inputs, so one compiled program per configuration serves the
@@ -85,7 +86,7 @@ def timed(fn, *args):
 
 
 configurations = {
-    "default (quaternion_acceleration + Tsit5)": {},
+    "default (quaternion_acceleration + DOP853)": {},
     "quaternion_omega + DOP853": {"formulation": "quaternion_omega", "solver": FusedDop853()},
 }
 sweeps = {}
@@ -128,9 +129,11 @@ fig
 # %% [markdown]
 # What this shows, and what the benchmarks confirm on more cases:
 #
-# - At tight tolerances a higher-order pair on the first-order `(q, ω)` equations wins;
-#   the default second-order form is the safe general choice (it handles every scene,
-#   with torques, pivots and free flight), not the fastest per digit.
+# - The two curves lie close together: with the same pair, the second-order form needs
+#   1.1–1.2× the steps of `(q, ω)` for the same error on this body (on the benchmarks
+#   page: up to 1.5× near the intermediate axis, and 0.65× on a heavy top, where the
+#   second-order form is the faster). The default handles every scene (torques, pivots,
+#   free flight) with no option to choose.
 # - The exact solver is exact to rounding and costs the same at any horizon: for a
 #   torque-free body there is no reason to integrate at all, except to study
 #   integrators.
@@ -243,8 +246,8 @@ for eps, interval, count, name in sep32:
 # | situation | use |
 # | --- | --- |
 # | torque-free body, any horizon | `simulate(..., solver="exact")` (or `jrigid.exact` directly): exact to rounding, about 1 µs per output time, differentiable |
-# | tight tolerances on a torque-free or smooth problem | `formulation="quaternion_omega", solver=jrigid.solvers.FusedDop853()` (its dense output holds up inside steps; `FusedDopri8`'s does not) |
-# | torques, pivots, gravity, free flight; the general case | the default (`quaternion_acceleration` + Tsit5, projected) |
+# | torques, pivots, gravity, free flight; the general case | the default (`quaternion_acceleration` + DOP853, projected) |
+# | the most speed per digit near an intermediate-axis flip | `formulation="quaternion_omega"` (same pair; 1.2–1.5× fewer steps there) |
 # | orientation not needed | `formulation="body_omega"` (ω only; cheapest) |
 # | Euler angles wanted as variables | `formulation="euler_angles"`: reports gimbal lock instead of returning garbage |
 # | float32 | errors of `1e-4`–`1e-2` over tens to thousands of periods; keep the default projection; check against a float64 run once |
