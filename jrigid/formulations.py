@@ -14,25 +14,28 @@ Every formulation turns the user's :class:`~jrigid.state.State` into its own var
   ω̇ from (17.35).
 
 **Quaternion acceleration (17.50).** With ``q̇ = ½ q ⊗ (0, ω)``,
-``q̈ = ½ q̇ ⊗ (0, ω) + ½ q ⊗ (0, ω̇)``, ω from (17.42) as ``2 vec(q* ⊗ q̇)/|q|²``. On
-``|q| = 1`` this equals the chapter's ``q̈ = ½ Wᵀ (ω̇, −2 Σ q̇ₘ²)``
-(``= ½ q ⊗ (0, ω̇) − |q̇|² q``), but the stages of a Runge–Kutta step lie off that sphere,
-and there the two differ. The first is what is integrated: it is homogeneous of degree
-one in ``(q, q̇)`` (a stage scaled by ``s`` moves as the unit state scaled by ``s``), where
-``−|q̇|² q`` is cubic, so a stage's error in ``|q|`` fed into its phase. Measured on the
-hard cases of ``benchmarks/hard_cases.py`` (rtol 1e-6 … 1e-10, DOP853 with projection):
-the orientation error fell 5–15× on the fast tops and the thin rod and up to 8× near the
-separatrix, at the same steps. The constraint manifold
-``|q|² = 1, q·q̇ = 0`` is invariant; off it, with ``e = |q|² − 1`` and ``c = q·q̇``, the
-residuals drift without decaying (``ė = 2c``, ``ċ = c²/|q|²``), so numerical errors
-accumulate. Two remedies: projection after each step (:meth:`AbstractFormulation.project`,
+``q̈ = ½ q̇ ⊗ (0, ω) + ½ q ⊗ (0, ω̇)``; on ``|q| = 1`` this is the chapter's
+``q̈ = ½ Wᵀ (ω̇, −2 Σ q̇ₘ²) = ½ q ⊗ (0, ω̇) − |q̇|² q``. The stages of a Runge–Kutta step
+lie off that sphere, where the ways of writing (17.50) differ. What is integrated is
+``q̈ = q̇ ⊗ p + ½ q ⊗ (0, ω̇)`` with ``p = q⁻¹ ⊗ q̇ = (s, ω/2)``: ω as in (17.42),
+``2 vec(q* ⊗ q̇)/|q|²``, and ``s = q·q̇/|q|²``. For any state ``q̇ = q ⊗ p``, and this
+field gives ``ṗ = ½ (0, ω̇)``: off the constraint the motion is the unit motion scaled by
+``exp(s t)``, ``s`` constant, so a stage's error in ``|q|`` or in ``q·q̇`` never reaches
+the rotation ``q/|q|`` or ω. The chapter's cubic ``−|q̇|² q`` (``centripetal=True``)
+turns a stage's error in ``|q|`` into an error in its rate of turning, that is in the
+phase. Measured on the hard cases of ``benchmarks/hard_cases.py`` (rtol 1e-6 … 1e-10,
+DOP853 with projection), the orientation error is 5–15× smaller on the fast tops and
+the thin rod and up to 8× smaller near the separatrix, at the same steps. The constraint
+manifold ``|q|² = 1, q·q̇ = 0`` is invariant; off it ``|q|`` changes at the constant rate
+``s``, so without a remedy step errors make ``|q|`` drift (the rotation and ω do not
+see it). Two remedies: projection after each step (:meth:`AbstractFormulation.project`,
 used by :func:`jrigid.simulate` through :class:`jrigid.solve.ProjectedSolver`) and the
-stabilising term ``−(2k c + ½ k² e) q / |q|²`` added to ``q̈`` (``stabilization = γ``,
-``k = γ |ω|``), which turns the residual dynamics into ``ë + 2k ė + k² e = 0`` to first
-order: a decay at rate ``k`` without stiffness. The term leaves ``vec(q* ⊗ q̇)`` alone,
-so as it pulls ``|q|`` back to one it rescales ``ω = 2 vec(q* ⊗ q̇)/|q|²``, and over long
-runs the energy error grows (the README has the measurements), which is why projection
-is the default.
+stabilising term ``−(2k c + ½ k² e) q / |q|²`` added to ``q̈`` (``e = |q|² − 1``,
+``c = q·q̇``, ``stabilization = γ``, ``k = γ |ω|``), which turns the residual dynamics
+into ``ë + 2k ė + k² e = 0`` to first order: a decay at rate ``k`` without stiffness.
+The term leaves ``vec(q* ⊗ q̇)`` alone, so as it pulls ``|q|`` back to one it rescales
+``ω = 2 vec(q* ⊗ q̇)/|q|²``, and over long runs the energy error grows (the README has
+the measurements), which is why projection is the default.
 
 **Euler angles.** Inverting (17.36): ``φ̇ = (ω1 sin ψ + ω2 cos ψ)/sin θ``,
 ``θ̇ = ω1 cos ψ − ω2 sin ψ``, ``ψ̇ = ω3 − φ̇ cos θ``. The rates blow up as
@@ -144,7 +147,8 @@ class QuaternionAcceleration(AbstractFormulation):
     Attributes:
         stabilization: ``γ ≥ 0``, gain of the constraint-stabilising term
             ``−(2k (q·q̇) + ½ k² (|q|² − 1)) q / |q|²`` with ``k = γ |ω|`` (0 = off).
-        centripetal: ``False`` (default): ``q̈ = ½ q̇ ⊗ (0, ω) + ½ q ⊗ (0, ω̇)``;
+        centripetal: ``False`` (default): ``q̈ = q̇ ⊗ p + ½ q ⊗ (0, ω̇)``,
+            ``p = q⁻¹ ⊗ q̇``;
             ``True``: the chapter's ``½ Wᵀ (ω̇, −2 Σ q̇ₘ²) = ½ q ⊗ (0, ω̇) − |q̇|² q``
             (jrigid 0.1's field). Equal on ``|q| = 1``; off it (inside a Runge–Kutta
             step) the second is less accurate (module docstring). For comparison and
@@ -166,13 +170,19 @@ class QuaternionAcceleration(AbstractFormulation):
     def vector_field(self, t, y, scene):
         q, qd = y.q, y.qdot
         n2 = linalg.dot(q, q)
-        omega = quat.angular_velocity(q, qd) * (1.0 / n2)  # (17.42) off |q| = 1 too
+        if self.centripetal:
+            omega = quat.angular_velocity(q, qd) * (1.0 / n2)  # (17.42) off |q| = 1 too
+        else:
+            # q̇ = q ⊗ p with p = q⁻¹ ⊗ q̇ = (s, ω/2): ω from (17.42) off |q| = 1 too, and s
+            # the rate at which |q| changes (zero on the constraint)
+            p = quat.multiply(quat.conjugate(q), qd) * (1.0 / n2)
+            omega = 2.0 * p[..., 1:]
         kin = Kinematics(linalg.unit(q), omega, y.x, y.v, q_raw=q)
         force, torque = scene.wrench(t, kin)
         omega_dot = scene.omega_dot(omega, torque)
-        # (17.50) as ½ q̇ ⊗ (0, ω) + ½ q ⊗ (0, ω̇): linear in (q, q̇) for a given ω (the
-        # module docstring says why this, and not −|q̇|² q, is integrated by default).
-        turning = -linalg.dot(qd, qd) * q if self.centripetal else quat.derivative(qd, omega)
+        # (17.50) as q̇ ⊗ p + ½ q ⊗ (0, ω̇) (= ½ q̇ ⊗ (0, ω) + ½ q ⊗ (0, ω̇) on the
+        # constraint): the module docstring says why this, and not −|q̇|² q, by default.
+        turning = -linalg.dot(qd, qd) * q if self.centripetal else quat.multiply(qd, p)
         qdd = turning + quat.derivative(q, omega_dot)
         if self.stabilization:
             k = self.stabilization * jnp.sqrt(linalg.dot(omega, omega))

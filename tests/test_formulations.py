@@ -177,6 +177,28 @@ def test_quaternion_acceleration_is_homogeneous_of_degree_one(q, qdot, s, case):
     np.testing.assert_allclose(scaled.qdot, s * dy.qdot, rtol=1e-10, atol=1e-10)
 
 
+@pytest.mark.parametrize("rate", [-0.3, 0.2])
+@pytest.mark.parametrize("case", [0, 1], ids=["driven", "top"])
+def test_quaternion_acceleration_keeps_a_change_of_scale_out_of_the_rotation(case, rate):
+    # q̇ = q ⊗ p with p = (s, ω/2), s ≠ 0 (q·q̇ ≠ 0, as at a stage): the field is
+    # q̇ ⊗ p + ½ q ⊗ (0, ω̇), ω̇ Euler's equations at the unit state, so that ṗ = ½ (0, ω̇)
+    # and the scale's rate s never enters the rotation
+    _, scene, torque, moments = _scenes()[case]
+    q = 1.3 * Rotation.random(random_state=RNG).as_quat(scalar_first=True)
+    omega = RNG.normal(size=3)
+    p = np.concatenate([[rate], 0.5 * omega])
+    qdot = _hamilton(q, p)
+    dy = QuaternionAcceleration().vector_field(0.0, State(jnp.asarray(q), jnp.asarray(qdot)),
+                                               scene)
+    omega_dot = _euler_rhs(moments, omega, torque(q / np.linalg.norm(q)))
+    expected = _hamilton(qdot, p) + 0.5 * _hamilton(q, np.concatenate([[0.0], omega_dot]))
+    np.testing.assert_allclose(dy.qdot, expected, atol=1e-11)
+    # ṗ = d/dt (q⁻¹ ⊗ q̇) from the field: (0, ω̇/2), whatever s is
+    q_inv = np.concatenate([[q[0]], -q[1:]]) / (q @ q)
+    p_dot = _hamilton(q_inv, np.asarray(dy.qdot)) - _hamilton(_hamilton(q_inv, qdot), p)
+    np.testing.assert_allclose(p_dot, np.concatenate([[0.0], 0.5 * omega_dot]), atol=1e-11)
+
+
 @pytest.mark.parametrize("s", [0.8, 1.25])
 @pytest.mark.parametrize("case", [0, 1], ids=["driven", "top"])
 @pytest.mark.parametrize("name", ["quaternion_acceleration", "quaternion_omega"])
