@@ -24,11 +24,11 @@ field gives ``ṗ = ½ (0, ω̇)``: off the constraint the motion is the unit mo
 the rotation ``q/|q|`` or ω. The chapter's cubic ``−|q̇|² q`` (``centripetal=True``)
 turns a stage's error in ``|q|`` into an error in its rate of turning, that is in the
 phase. Measured on the hard cases of ``benchmarks/hard_cases.py`` (rtol 1e-6 … 1e-10,
-DOP853 with projection), the orientation error is 5–15× smaller on the fast tops and
-the thin rod and up to 8× smaller near the separatrix, at the same steps. The constraint
-manifold ``|q|² = 1, q·q̇ = 0`` is invariant; off it ``|q|`` changes at the constant rate
-``s``, so without a remedy step errors make ``|q|`` drift (the rotation and ω do not
-see it). Two remedies: projection after each step (:meth:`AbstractFormulation.project`,
+DOP853 with projection), the orientation error is 8–16× smaller on the fast tops, the
+thin rod and near the separatrix at ε = 1e-6 (2.3–3× at ε = 1e-4), at the same steps.
+The constraint manifold ``|q|² = 1, q·q̇ = 0`` is invariant; off it ``|q|`` changes at
+the constant rate ``s``, so without a remedy step errors make ``|q|`` drift (the rotation
+and ω do not see it). Two remedies: projection after each step (:meth:`AbstractFormulation.project`,
 used by :func:`jrigid.simulate` through :class:`jrigid.solve.ProjectedSolver`) and the
 stabilising term ``−(2k c + ½ k² e) q / |q|²`` added to ``q̈`` (``e = |q|² − 1``,
 ``c = q·q̇``, ``stabilization = γ``, ``k = γ |ω|``), which turns the residual dynamics
