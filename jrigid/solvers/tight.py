@@ -30,6 +30,35 @@ def _tensordot(row, k):
     return jnp.tensordot(jnp.asarray(row, k.dtype), k[: len(row)], axes=1)
 
 
+def _rounded_consistent(row, total: float) -> np.ndarray:
+    """``row`` rounded to float32, its smallest nonzero entry then adjusted so that the
+    entries (summed exactly, in float64) add up to ``total`` to within that entry's ulp."""
+    r = np.asarray(row, np.float32).astype(np.float64)
+    nonzero = np.flatnonzero(r)
+    if nonzero.size:
+        j = nonzero[np.argmin(np.abs(r[nonzero]))]
+        r[j] = np.float64(np.float32(r[j] + (total - r.sum())))
+    return r
+
+
+def _single_precision(tableau: diffrax.ButcherTableau) -> diffrax.ButcherTableau:
+    """``tableau`` with float32 coefficients that keep its consistency conditions.
+
+    Rounded to float32 one by one, DOP853's weights (up to 5.8 in size) no longer sum to
+    one: by about 5e-7, an error of that relative size in every step's increment, which
+    over many steps becomes a phase error independent of the tolerance. Adjusting the
+    smallest weight of each row restores ``Σ bᵢ = 1``, ``Σⱼ aᵢⱼ = cᵢ`` and ``Σ eᵢ = 0`` to
+    within its ulp (about 1e-10), keeping the first-same-as-last row equal to ``b``.
+    """
+    c = np.asarray(tableau.c, np.float32).astype(np.float64)
+    b = _rounded_consistent(tableau.b_sol, 1.0)
+    rows = [_rounded_consistent(a, c_i) for a, c_i in zip(tableau.a_lower, c, strict=True)]
+    if np.array_equal(tableau.b_sol[:-1], tableau.a_lower[-1]):
+        rows[-1] = b[:-1].copy()
+    return diffrax.ButcherTableau(c=c, b_sol=b, b_error=_rounded_consistent(tableau.b_error, 0.0),
+                                  a_lower=tuple(rows))
+
+
 class TightDop853(diffrax.AbstractERK):
     """Hairer's DOP853 (the pair of scipy's ``solve_ivp(method="DOP853")``) as a diffrax
     Runge–Kutta solver, with its error estimate times :attr:`factor`.
@@ -67,6 +96,8 @@ class TightDop853(diffrax.AbstractERK):
     """
 
     tableau: ClassVar[diffrax.ButcherTableau] = _dop853_tableau()
+    #: the weights of DOP853's 3rd-order error estimate
+    error3: ClassVar[np.ndarray] = _dop853.E3
     interpolation_cls: ClassVar = _Dop853Increments
     factor: float = 10.0
     output_ts: jax.Array | None = None
@@ -106,12 +137,31 @@ class TightDop853(diffrax.AbstractERK):
         program, _, _ = eqx.filter_make_jaxpr(lambda t, y, a: terms.vf(t, y, a))(t0, y0, args)
         return _size(program.jaxpr) < self.fuse_below
 
+    def in_precision_of(self, y0) -> TightDop853:
+        """This solver with the coefficients for the floating type of ``y0``: in float32
+        (or narrower), :func:`_single_precision`'s (measured on a free rotor over 10 and
+        1000 periods, rtol 1e-5 and 2e-6: orientation error 6–10× smaller, same steps);
+        otherwise itself."""
+        dtype = jnp.result_type(*jax.tree_util.tree_leaves(y0))
+        if isinstance(self, _SinglePrecision) or not jnp.issubdtype(dtype, jnp.floating):
+            return self
+        if jnp.finfo(dtype).bits > 32:
+            return self
+        return _SinglePrecision(**{f.name: getattr(self, f.name)
+                                   for f in dataclasses.fields(self) if f.init})
+
     def init(self, terms, t0, t1, y0, args):
+        solver = self.in_precision_of(y0)
+        if solver is not self:
+            return solver.init(terms, t0, t1, y0, args)
         if self.fused(terms, t0, y0, args):
             return _FUSED.init(terms, t0, t1, y0, args)
         return super().init(terms, t0, t1, y0, args)
 
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
+        solver = self.in_precision_of(y0)
+        if solver is not self:
+            return solver.step(terms, t0, t1, y0, args, solver_state, made_jump)
         if self.fused(terms, t0, y0, args):
             y1, y_error, dense_info, solver_state, result = _FUSED.step(
                 terms, t0, t1, y0, args, solver_state, made_jump
@@ -123,7 +173,7 @@ class TightDop853(diffrax.AbstractERK):
                 terms, t0, t1, y0, args, solver_state, made_jump
             )
             k = dense_info["k"]  # the 13 stage increments h f(tᵢ, yᵢ), leading axis
-            e3 = jax.tree_util.tree_map(lambda a: _tensordot(_dop853.E3, a), k)
+            e3 = jax.tree_util.tree_map(lambda a: _tensordot(self.error3, a), k)
             y_error = _dop853_error(e5, e3)
         y_error = jax.tree_util.tree_map(lambda a: self.factor * a, y_error)
         k = jax.tree_util.tree_map(
@@ -141,6 +191,14 @@ class TightDop853(diffrax.AbstractERK):
             inside = (i < ts.shape[0]) & (ts[jnp.minimum(i, ts.shape[0] - 1)] <= t1)
             k = jax.lax.cond(inside, dense_stages, lambda k: k, k)
         return y1, y_error, dict(y0=y0, y1=y1, f=k), solver_state, result
+
+
+class _SinglePrecision(TightDop853):
+    """:class:`TightDop853` with coefficients for float32 (:func:`_single_precision`); its
+    stages in diffrax's stage loop (``fuse_below`` writes them out with the float64 ones)."""
+
+    tableau: ClassVar[diffrax.ButcherTableau] = _single_precision(_dop853_tableau())
+    error3: ClassVar[np.ndarray] = _rounded_consistent(_dop853.E3, 0.0)
 
 
 class _FusedStages(FusedDop853):
