@@ -335,3 +335,17 @@ def test_float32_free_rotor_phase_is_set_by_the_tolerance_not_the_coefficients(f
     q = np.asarray(traj.q, np.float64)
     err = np.minimum(np.linalg.norm(q - ref, axis=-1), np.linalg.norm(q + ref, axis=-1))
     assert 2 * err.max() < 1e-5, 2 * err.max()
+
+
+@pytest.mark.parametrize("solver", [FusedTsit5, FusedDopri8, FusedDop853])
+def test_written_out_pairs_take_consistent_coefficients_in_float32(solver):
+    from jrigid.solvers.fused import in_precision
+
+    tab = solver.tableau
+    assert in_precision(tab, jnp.float64) is tab
+    single = in_precision(tab, jnp.float32)
+    assert in_precision(tab, jnp.float32) is single
+    assert abs(np.sum(single.b_sol) - 1.0) < 1e-9 and abs(np.sum(single.b_error)) < 1e-9
+    for a_i, c_i in zip(single.a_lower, single.c, strict=True):  # a row of large entries
+        assert abs(np.sum(a_i) - c_i) < 2.5e-7  # only to its smallest entry's float32 ulp
+        np.testing.assert_array_equal(np.asarray(a_i, np.float32).astype(np.float64), a_i)

@@ -16,6 +16,7 @@ from jrigid.solvers.fused import (
     PolynomialInterpolation,
     StageInterpolation,
     _combination,
+    rounded_consistent,
 )
 
 __all__ = ["FusedDop853", "FusedDopri8", "FusedTsit5"]
@@ -170,7 +171,11 @@ class FusedDop853(FusedRungeKutta):
 
     def error_estimate(self, h, stages):
         e5 = super().error_estimate(h, stages)
-        return _dop853_error(e5, _combination(None, h, _dop853.E3, stages))
+        e3 = _dop853.E3 if jnp.finfo(stages[0].dtype).bits > 32 else _E3_SINGLE
+        return _dop853_error(e5, _combination(None, h, e3, stages))
+
+
+_E3_SINGLE = rounded_consistent(_dop853.E3, 0.0)
 
 
 def _dop853_error(e5, e3):

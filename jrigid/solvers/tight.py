@@ -13,6 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.integrate._ivp import dop853_coefficients as _dop853
 
+from jrigid.solvers.fused import rounded_consistent, single_precision
 from jrigid.solvers.pairs import FusedDop853, _dop853_error, _dop853_tableau, _Dop853Dense
 
 __all__ = ["TightDop853"]
@@ -28,35 +29,6 @@ class _Dop853Increments(_Dop853Dense):
 def _tensordot(row, k):
     """``Σᵢ rowᵢ kᵢ`` over the leading axis of ``k`` (the first ``len(row)`` entries)."""
     return jnp.tensordot(jnp.asarray(row, k.dtype), k[: len(row)], axes=1)
-
-
-def _rounded_consistent(row, total: float) -> np.ndarray:
-    """``row`` rounded to float32, its smallest nonzero entry then adjusted so that the
-    entries (summed exactly, in float64) add up to ``total`` to within that entry's ulp."""
-    r = np.asarray(row, np.float32).astype(np.float64)
-    nonzero = np.flatnonzero(r)
-    if nonzero.size:
-        j = nonzero[np.argmin(np.abs(r[nonzero]))]
-        r[j] = np.float64(np.float32(r[j] + (total - r.sum())))
-    return r
-
-
-def _single_precision(tableau: diffrax.ButcherTableau) -> diffrax.ButcherTableau:
-    """``tableau`` with float32 coefficients that keep its consistency conditions.
-
-    Rounded to float32 one by one, DOP853's weights (up to 5.8 in size) no longer sum to
-    one: by about 5e-7, an error of that relative size in every step's increment, which
-    over many steps becomes a phase error independent of the tolerance. Adjusting the
-    smallest weight of each row restores ``Σ bᵢ = 1``, ``Σⱼ aᵢⱼ = cᵢ`` and ``Σ eᵢ = 0`` to
-    within its ulp (about 1e-10), keeping the first-same-as-last row equal to ``b``.
-    """
-    c = np.asarray(tableau.c, np.float32).astype(np.float64)
-    b = _rounded_consistent(tableau.b_sol, 1.0)
-    rows = [_rounded_consistent(a, c_i) for a, c_i in zip(tableau.a_lower, c, strict=True)]
-    if np.array_equal(tableau.b_sol[:-1], tableau.a_lower[-1]):
-        rows[-1] = b[:-1].copy()
-    return diffrax.ButcherTableau(c=c, b_sol=b, b_error=_rounded_consistent(tableau.b_error, 0.0),
-                                  a_lower=tuple(rows))
 
 
 class TightDop853(diffrax.AbstractERK):
@@ -139,9 +111,9 @@ class TightDop853(diffrax.AbstractERK):
 
     def in_precision_of(self, y0) -> TightDop853:
         """This solver with the coefficients for the floating type of ``y0``: in float32
-        (or narrower), :func:`_single_precision`'s (measured on a free rotor over 10 and
-        1000 periods, rtol 1e-5 and 2e-6: orientation error 6–10× smaller, same steps);
-        otherwise itself."""
+        (or narrower), those of :func:`~jrigid.solvers.fused.single_precision` (measured
+        on a free rotor over 10 to 10⁴ periods, rtol 1e-5 and 2e-6: orientation error
+        6–11× smaller, same steps); otherwise itself."""
         dtype = jnp.result_type(*jax.tree_util.tree_leaves(y0))
         if isinstance(self, _SinglePrecision) or not jnp.issubdtype(dtype, jnp.floating):
             return self
@@ -194,11 +166,11 @@ class TightDop853(diffrax.AbstractERK):
 
 
 class _SinglePrecision(TightDop853):
-    """:class:`TightDop853` with coefficients for float32 (:func:`_single_precision`); its
-    stages in diffrax's stage loop (``fuse_below`` writes them out with the float64 ones)."""
+    """:class:`TightDop853` with coefficients for float32
+    (:func:`~jrigid.solvers.fused.single_precision`)."""
 
-    tableau: ClassVar[diffrax.ButcherTableau] = _single_precision(_dop853_tableau())
-    error3: ClassVar[np.ndarray] = _rounded_consistent(_dop853.E3, 0.0)
+    tableau: ClassVar[diffrax.ButcherTableau] = single_precision(_dop853_tableau())
+    error3: ClassVar[np.ndarray] = rounded_consistent(_dop853.E3, 0.0)
 
 
 class _FusedStages(FusedDop853):
