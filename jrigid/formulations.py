@@ -170,19 +170,20 @@ class QuaternionAcceleration(AbstractFormulation):
     def vector_field(self, t, y, scene):
         q, qd = y.q, y.qdot
         n2 = linalg.dot(q, q)
+        # q̈ = turning + ½ q ⊗ (0, ω̇) (17.50); the module docstring says why the turning
+        # term is q̇ ⊗ p by default and not the chapter's −|q̇|² q
         if self.centripetal:
             omega = quat.angular_velocity(q, qd) * (1.0 / n2)  # (17.42) off |q| = 1 too
+            turning = -linalg.dot(qd, qd) * q
         else:
             # q̇ = q ⊗ p with p = q⁻¹ ⊗ q̇ = (s, ω/2): ω from (17.42) off |q| = 1 too, and s
             # the rate at which |q| changes (zero on the constraint)
             p = quat.multiply(quat.conjugate(q), qd) * (1.0 / n2)
             omega = 2.0 * p[..., 1:]
+            turning = quat.multiply(qd, p)
         kin = Kinematics(linalg.unit(q), omega, y.x, y.v, q_raw=q)
         force, torque = scene.wrench(t, kin)
         omega_dot = scene.omega_dot(omega, torque)
-        # (17.50) as q̇ ⊗ p + ½ q ⊗ (0, ω̇) (= ½ q̇ ⊗ (0, ω) + ½ q ⊗ (0, ω̇) on the
-        # constraint): the module docstring says why this, and not −|q̇|² q, by default.
-        turning = -linalg.dot(qd, qd) * q if self.centripetal else quat.multiply(qd, p)
         qdd = turning + quat.derivative(q, omega_dot)
         if self.stabilization:
             k = self.stabilization * jnp.sqrt(linalg.dot(omega, omega))

@@ -62,11 +62,17 @@ def single_precision(tableau: diffrax.ButcherTableau) -> diffrax.ButcherTableau:
 _SINGLE: dict[int, tuple[diffrax.ButcherTableau, diffrax.ButcherTableau]] = {}
 
 
+def single(dtype) -> bool:
+    """Whether ``dtype`` is a floating type of 32 bits or fewer (coefficients rounded to
+    it need :func:`single_precision`)."""
+    return bool(jnp.issubdtype(dtype, jnp.floating)) and jnp.finfo(dtype).bits <= 32
+
+
 def in_precision(tableau: diffrax.ButcherTableau, dtype) -> diffrax.ButcherTableau:
     """``tableau`` for stages of floating type ``dtype``: :func:`single_precision`'s in
     float32 or narrower (computed once per tableau: the solvers' are class constants),
     else itself."""
-    if jnp.finfo(dtype).bits > 32:
+    if not single(dtype):
         return tableau
     key = id(tableau)
     if key not in _SINGLE:

@@ -17,6 +17,7 @@ from jrigid.solvers.fused import (
     StageInterpolation,
     _combination,
     rounded_consistent,
+    single,
 )
 
 __all__ = ["FusedDop853", "FusedDopri8", "FusedTsit5"]
@@ -171,10 +172,11 @@ class FusedDop853(FusedRungeKutta):
 
     def error_estimate(self, h, stages):
         e5 = super().error_estimate(h, stages)
-        e3 = _dop853.E3 if jnp.finfo(stages[0].dtype).bits > 32 else _E3_SINGLE
+        e3 = _E3_SINGLE if single(stages[0].dtype) else _dop853.E3
         return _dop853_error(e5, _combination(None, h, e3, stages))
 
 
+#: DOP853's 3rd-order error weights for float32 stages (:func:`rounded_consistent`)
 _E3_SINGLE = rounded_consistent(_dop853.E3, 0.0)
 
 

@@ -13,8 +13,14 @@ import jax.numpy as jnp
 import numpy as np
 from scipy.integrate._ivp import dop853_coefficients as _dop853
 
-from jrigid.solvers.fused import rounded_consistent, single_precision
-from jrigid.solvers.pairs import FusedDop853, _dop853_error, _dop853_tableau, _Dop853Dense
+from jrigid.solvers.fused import in_precision, single
+from jrigid.solvers.pairs import (
+    _E3_SINGLE,
+    FusedDop853,
+    _dop853_error,
+    _dop853_tableau,
+    _Dop853Dense,
+)
 
 __all__ = ["TightDop853"]
 
@@ -115,9 +121,7 @@ class TightDop853(diffrax.AbstractERK):
         on a free rotor over 10 to 10⁴ periods, rtol 1e-5 and 2e-6: orientation error
         6–11× smaller, same steps); otherwise itself."""
         dtype = jnp.result_type(*jax.tree_util.tree_leaves(y0))
-        if isinstance(self, _SinglePrecision) or not jnp.issubdtype(dtype, jnp.floating):
-            return self
-        if jnp.finfo(dtype).bits > 32:
+        if isinstance(self, _SinglePrecision) or not single(dtype):
             return self
         return _SinglePrecision(**{f.name: getattr(self, f.name)
                                    for f in dataclasses.fields(self) if f.init})
@@ -167,10 +171,10 @@ class TightDop853(diffrax.AbstractERK):
 
 class _SinglePrecision(TightDop853):
     """:class:`TightDop853` with coefficients for float32
-    (:func:`~jrigid.solvers.fused.single_precision`)."""
+    (:func:`~jrigid.solvers.fused.in_precision`)."""
 
-    tableau: ClassVar[diffrax.ButcherTableau] = single_precision(_dop853_tableau())
-    error3: ClassVar[np.ndarray] = rounded_consistent(_dop853.E3, 0.0)
+    tableau: ClassVar[diffrax.ButcherTableau] = in_precision(TightDop853.tableau, np.float32)
+    error3: ClassVar[np.ndarray] = _E3_SINGLE
 
 
 class _FusedStages(FusedDop853):
