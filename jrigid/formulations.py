@@ -48,6 +48,7 @@ rejected).
 from __future__ import annotations
 
 import functools
+import math
 from typing import ClassVar
 
 import diffrax
@@ -159,6 +160,19 @@ class QuaternionAcceleration(AbstractFormulation):
     carries_quaternion: ClassVar[bool] = True
     stabilization: float = eqx.field(static=True, default=0.0)
     centripetal: bool = eqx.field(static=True, default=False)
+
+    def __check_init__(self):
+        gain = self.stabilization
+        number = isinstance(gain, (int, float)) and not isinstance(gain, bool)
+        if not (number and math.isfinite(gain) and gain >= 0):
+            raise ValueError(
+                f"QuaternionAcceleration stabilization must be a number >= 0, got {gain!r}"
+            )
+        flag = self.centripetal
+        if not isinstance(flag, bool):
+            raise ValueError(
+                f"QuaternionAcceleration centripetal must be True or False, got {flag!r}"
+            )
 
     def from_state(self, scene, state):
         return self.project(state, scene)

@@ -263,3 +263,16 @@ def test_check_scene_by_object_or_name_and_its_errors():
         check_scene("body_omega", pivoted)
     with pytest.raises(ValueError, match="unknown formulation 'matrix'"):
         check_scene("matrix", pivoted)
+
+
+@pytest.mark.parametrize("options, match", [
+    (dict(stabilization=-1.0), "stabilization must be a number >= 0"),
+    (dict(stabilization=float("nan")), "stabilization must be a number >= 0"),
+    (dict(stabilization="1"), "stabilization must be a number >= 0"),
+    (dict(stabilization=True), "stabilization must be a number >= 0"),
+    (dict(centripetal=1), "centripetal must be True or False"),
+    (dict(centripetal="no"), "centripetal must be True or False"),
+])
+def test_quaternion_acceleration_refuses_bad_options(options, match):
+    with pytest.raises(ValueError, match=match):
+        QuaternionAcceleration(**options)
