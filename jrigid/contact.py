@@ -152,7 +152,8 @@ def _segment(scene, formulation, solver, y0, t0, t1, rtol, atol, dt0, depth, max
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(formulation.vector_field), solver, t0, t1, dt0, y0, args=scene,
         saveat=diffrax.SaveAt(t1=True, dense=True),
-        stepsize_controller=controller(jnp.stack([t0, t1]), rtol, atol),
+        stepsize_controller=controller(jnp.stack([t0, t1]), rtol, atol,
+                                       formulation=formulation),
         event=event, max_steps=max_steps, throw=False,
     )  # fmt: skip
     R = diffrax.RESULTS

@@ -311,11 +311,12 @@ def _solve_arrays(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoin
         solver = SavingSolver(solver)
         kind = "lax" if isinstance(adjoint, diffrax.ForwardMode) else "checkpointed"
         stepsize_controller = controller(
-            ts, rtol, atol, layout=flat, cls=SavingController, output_ts=ts,
+            ts, rtol, atol, layout=flat, cls=SavingController, formulation=formulation,
+            output_ts=ts,
             interpolation_cls=solver.interpolation_cls, loop_kind=kind,
         )
     elif stepsize_controller is None:
-        stepsize_controller = controller(ts, rtol, atol, layout=flat)
+        stepsize_controller = controller(ts, rtol, atol, layout=flat, formulation=formulation)
     y0_flat = flat.ravel(y0)
     sol = run(flat, solver, ts, dt0, y0_flat, scene, saveat=saveat,
               stepsize_controller=stepsize_controller, adjoint=adjoint, max_steps=max_steps,

@@ -2,11 +2,12 @@
 
 For each float64 case of ``benchmarks/hard_cases.py`` with an orientation (torque-free
 bodies, heavy tops, the published checks), the default call's final-time error (relative
-ω, sign-invariant q) against the case's closed-form reference stays within rtol (measured
-with this version: at most 0.57·rtol from 1e-4 to 1e-10), and never more than twice the
-``quaternion_omega`` form's error or rtol, whichever is larger. (Twice the first-order
-form's error alone is missed where that form's ω is far more accurate than rtol: the
-nearly symmetric body, HNW and near the separatrix; ``docs/benchmarks.md``.)
+ω, sign-invariant q) against the case's closed-form reference stays within rtol, and
+never more than twice the ``quaternion_omega`` form's error at the same tolerances
+(measured with this version from rtol 1e-4 to 1e-10: at most 0.31·rtol, and at most
+1.4× that form's error except near the separatrix at ε = 1e-6 and rtol 1e-10, where the
+default's error jumps between 0.005 and 0.36·rtol from one tolerance to the next;
+``docs/benchmarks.md``). ``floor`` is the disagreement of the case's two references.
 """
 
 from __future__ import annotations
@@ -41,13 +42,13 @@ def test_default_is_as_accurate_as_the_first_order_form(key):
     prob = hc.problem(case, "small")
     ts = jnp.array([0.0, ref["t1"]])
     floor = ref["floor"] or 0.0
-    for rtol in (1e-6, 1e-10):
+    for rtol in (1e-4, 1e-6, 1e-10):
         kw = dict(rtol=rtol, atol=1e-2 * rtol, max_steps=1_000_000)
         default = _error(simulate(prob.scene(), prob.state(), ts, **kw), ref)
         omega_form = _error(simulate(prob.scene(), prob.state(), ts,
                                      formulation="quaternion_omega", **kw), ref)
         assert default <= rtol + 2 * floor, (rtol, default, omega_form)
-        assert default <= max(2 * omega_form, rtol) + 2 * floor, (rtol, default, omega_form)
+        assert default <= 2 * omega_form + 2 * floor, (rtol, default, omega_form)
 
 
 @pytest.mark.parametrize("key", LONG)

@@ -272,7 +272,31 @@ def test_check_scene_by_object_or_name_and_its_errors():
     (dict(stabilization=True), "stabilization must be a number >= 0"),
     (dict(centripetal=1), "centripetal must be True or False"),
     (dict(centripetal="no"), "centripetal must be True or False"),
+    (dict(tolerance_scale=0.5), "tolerance_scale must be a number >= 1"),
+    (dict(tolerance_scale=float("inf")), "tolerance_scale must be a number >= 1"),
+    (dict(tolerance_scale="6"), "tolerance_scale must be a number >= 1"),
 ])
 def test_quaternion_acceleration_refuses_bad_options(options, match):
     with pytest.raises(ValueError, match=match):
         QuaternionAcceleration(**options)
+
+
+def test_step_tolerances_tighten_within_what_the_dtype_resolves():
+    """The second-order form's controller works to ``rtol / s`` (and ``atol / s``), but
+    not below 100 eps of the solve's dtype nor above what was asked; other forms and
+    ``s = 1`` pass the tolerances through."""
+    eps64, eps32 = float(jnp.finfo(jnp.float64).eps), float(jnp.finfo(jnp.float32).eps)
+    form = QuaternionAcceleration(tolerance_scale=6.0)
+    rtol, atol = form.step_tolerances(1e-8, 1e-10, eps64)
+    assert float(rtol) == pytest.approx(1e-8 / 6) and float(atol) == pytest.approx(1e-10 / 6)
+    rtol, atol = form.step_tolerances(3e-14, 3e-16, eps64)  # floored at 100 eps
+    assert float(rtol) == pytest.approx(100 * eps64)
+    assert float(atol) == pytest.approx(3e-16 * 100 * eps64 / 3e-14)
+    rtol, atol = form.step_tolerances(1e-5, 1e-7, eps32)  # float32: nothing left to tighten
+    assert float(rtol) == pytest.approx(1e-5) and float(atol) == pytest.approx(1e-7)
+    rtol, atol = form.step_tolerances(1e-3, 1e-5, eps32)
+    assert float(rtol) == pytest.approx(1e-3 / 6) and float(atol) == pytest.approx(1e-5 / 6)
+    rtol, atol = form.step_tolerances(0.0, 1e-9, eps64)  # atol alone: scaled
+    assert float(rtol) == 0.0 and float(atol) == pytest.approx(1e-9 / 6)
+    for other in (QuaternionAcceleration(tolerance_scale=1), get_formulation("quaternion_omega")):
+        assert other.step_tolerances(1e-8, 1e-10, eps64) == (1e-8, 1e-10)

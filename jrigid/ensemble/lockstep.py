@@ -131,7 +131,8 @@ def _solve(scene, states, ts, rtol, atol, dt0, formulation, solver, adjoint, max
             )(scene, states)
         solver = projected(solver, batched, invariants)
     sol = run(batched, solver, ts, dt0, y0, scene, saveat=saveat,
-              stepsize_controller=controller(ts, rtol, atol, norm=_max_member_rms),
+              stepsize_controller=controller(ts, rtol, atol, norm=_max_member_rms,
+                                             formulation=formulation),
               adjoint=adjoint, max_steps=max_steps)
     ys = solver.outputs(sol.ys, scene, y0) if project else sol.ys
     ys = jax.tree_util.tree_map(lambda a: jnp.moveaxis(a, 1, 0), ys)  # (N, T + 1, ...)

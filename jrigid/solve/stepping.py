@@ -310,17 +310,21 @@ class VectorPIDController(diffrax.PIDController):
 PI_COEFFICIENTS = dict(pcoeff=0.3, icoeff=0.3)
 
 
-def controller(ts, rtol, atol, norm=None, layout=None, cls=None, **fields) -> VectorPIDController:
+def controller(ts, rtol, atol, norm=None, layout=None, cls=None, formulation=None,
+               **fields) -> VectorPIDController:
     """The step-size controller of every jrigid solve: a PI controller (coefficients
     :data:`PI_COEFFICIENTS`) on the error scaled per vector (:class:`VectorPIDController`;
     ``layout``: the :class:`~jrigid.solve.flat.Flat` of a flat state), ``norm`` diffrax's
     default RMS unless given; ``cls`` a subclass to build instead, with its own ``fields``
-    (:class:`~jrigid.solve.saving.SavingController`).
+    (:class:`~jrigid.solve.saving.SavingController`). With a ``formulation``, it works to
+    that formulation's :meth:`~jrigid.formulations.AbstractFormulation.step_tolerances`.
 
     ``dtmin`` is ``4 eps max(|t0|, |t1|)`` without forcing: a smaller step ends the solve
     with ``dt_min_reached`` (:attr:`~jrigid.trajectory.Result.step_size_collapse` or ``nonfinite``).
     """
     eps = jnp.finfo(ts.dtype).eps
+    if formulation is not None:
+        rtol, atol = formulation.step_tolerances(rtol, atol, eps)
     extra = {} if norm is None else {"norm": norm}
     return (VectorPIDController if cls is None else cls)(
         rtol=rtol,
