@@ -9,9 +9,11 @@ controller, and after every step
 the state is projected back onto ``|q| = 1``, ``q·q̇ = 0`` and onto the invariants the
 scene conserves (energy and ``|L|`` for a torque-free body; energy, the vertical and —
 for a symmetric top — the axial angular momentum on a pivot under gravity): see
-:mod:`jrigid.invariants`. The projection is what makes the second-order form as accurate
-per tolerance as the first-order ``(q, ω)`` form; the measurements are in the README
-("Speed and accuracy").
+:mod:`jrigid.invariants`. The projection, and step control at a sixth of the requested
+tolerances (:class:`~jrigid.formulations.QuaternionAcceleration`'s ``tolerance_scale``:
+in this form ω carries the orientation's error), are what make the second-order form as
+accurate per tolerance as the first-order ``(q, ω)`` form; the measurements are in the
+README ("Measurements").
 
 The whole solve — input checks included — is one compiled program per scene structure,
 formulation, solver, ``max_steps`` and number of output times; tolerances, ``dt0``, the
@@ -409,7 +411,13 @@ def simulate(
             ``atol``, ``max_steps``, ``adjoint`` and ``project`` are ignored, ``dense``,
             ``saveat``, ``stepsize_controller`` and ``event`` are refused.
         rtol, atol: PID tolerances, traced (changing them does not recompile). Defaults
-            ``1e-8`` and ``1e-10`` (float64), ``1e-5`` and ``1e-7`` (float32).
+            ``1e-8`` and ``1e-10`` (float64), ``1e-5`` and ``1e-7`` (float32). The
+            default formulation steps to ``rtol / 6`` and ``atol / 6``
+            (``tolerance_scale`` of
+            :class:`~jrigid.formulations.QuaternionAcceleration`): its error at a given
+            rtol is then about the ``quaternion_omega`` form's (measured on the hard
+            cases of ``benchmarks/hard_cases.py``: within 0.31·rtol, and within 1.4× that
+            form's error but for one case at its rounding floor).
             ``rtol`` must be finite, ``> 0`` and at least ``10 eps``. In float32 a
             :class:`~jrigid.solve.PrecisionWarning` says when the horizon is too long
             for ``rtol`` (:func:`jrigid.solve.precision_problem`; concrete inputs only).
