@@ -162,12 +162,14 @@ class QuaternionAcceleration(AbstractFormulation):
             step) the second is less accurate (module docstring). For comparison and
             teaching.
         tolerance_scale: ``s ≥ 1``: jrigid's step-size controller works to ``rtol / s``
-            and ``atol / s`` (never below ``100 eps`` of the solve's dtype, nor below
-            what was asked). In this form ω is ``2 q* ⊗ q̇``, so it carries the
-            orientation's error, where the ``(q, ω)`` form integrates ω by an equation of
-            its own; at the same tolerance its error was 1.7–7.9× that form's on the
-            nearly symmetric body, near the separatrix and on Hairer's rigid body
-            (``docs/benchmarks.md``). ``s = 6`` brings it within 1.4× of it there, for
+            and ``atol / s``, but not below ``100 eps`` of the solve's dtype (or ``rtol``,
+            if that is smaller: float32 at its default rtol is not tightened). In this
+            form ω is ``2 q* ⊗ q̇``, so it carries the orientation's error, where the
+            ``(q, ω)`` form integrates ω by an equation of its own; at the same tolerance
+            its error was 1.7–7.9× that form's on the nearly symmetric body, near the
+            separatrix and on Hairer's rigid body (``docs/benchmarks.md``). ``s = 6``
+            brings it within 1.4× of it on those cases (but near the separatrix at
+            ε = 1e-6 from rtol 1e-10, where the error does not follow the tolerance), for
             ``6^(1/9) ≈ 1.2×`` the steps at a given rtol; the steps at a given error are
             unchanged (the error is proportional to the tolerance). 1 turns it off.
     """
@@ -198,6 +200,8 @@ class QuaternionAcceleration(AbstractFormulation):
             )
 
     def step_tolerances(self, rtol, atol, eps):
+        """``(rtol, atol) / s`` with ``s = tolerance_scale``, the relative one kept
+        at or above ``min(rtol, 100 eps)`` and the absolute one scaled alike."""
         if self.tolerance_scale == 1:
             return rtol, atol
         floor = jnp.minimum(rtol, 100 * eps)

@@ -417,7 +417,8 @@ def simulate(
             :class:`~jrigid.formulations.QuaternionAcceleration`): its error at a given
             rtol is then about the ``quaternion_omega`` form's (measured on the hard
             cases of ``benchmarks/hard_cases.py``: within 0.31·rtol, and within 1.4× that
-            form's error but for one case at its rounding floor).
+            form's error but near the separatrix at ε = 1e-6 from rtol 1e-10, where the
+            error does not follow the tolerance).
             ``rtol`` must be finite, ``> 0`` and at least ``10 eps``. In float32 a
             :class:`~jrigid.solve.PrecisionWarning` says when the horizon is too long
             for ``rtol`` (:func:`jrigid.solve.precision_problem`; concrete inputs only).
