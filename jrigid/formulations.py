@@ -149,6 +149,15 @@ class AbstractFormulation(eqx.Module):
         return None
 
 
+def _check_number(name: str, value, low: float) -> None:
+    """``ValueError`` unless ``value`` is a finite real number (not a bool) ``>= low``."""
+    number = isinstance(value, (int, float)) and not isinstance(value, bool)
+    if not (number and math.isfinite(value) and value >= low):
+        raise ValueError(
+            f"QuaternionAcceleration {name} must be a number >= {low}, got {value!r}"
+        )
+
+
 class QuaternionAcceleration(AbstractFormulation):
     """State ``(q, q̇)``: ω from (17.42), ω̇ from Euler's equations, q̈ from (17.50).
 
@@ -181,23 +190,13 @@ class QuaternionAcceleration(AbstractFormulation):
     tolerance_scale: float = eqx.field(static=True, default=6.0)
 
     def __check_init__(self):
-        gain = self.stabilization
-        number = isinstance(gain, (int, float)) and not isinstance(gain, bool)
-        if not (number and math.isfinite(gain) and gain >= 0):
-            raise ValueError(
-                f"QuaternionAcceleration stabilization must be a number >= 0, got {gain!r}"
-            )
+        _check_number("stabilization", self.stabilization, 0)
         flag = self.centripetal
         if not isinstance(flag, bool):
             raise ValueError(
                 f"QuaternionAcceleration centripetal must be True or False, got {flag!r}"
             )
-        scale = self.tolerance_scale
-        number = isinstance(scale, (int, float)) and not isinstance(scale, bool)
-        if not (number and math.isfinite(scale) and scale >= 1):
-            raise ValueError(
-                f"QuaternionAcceleration tolerance_scale must be a number >= 1, got {scale!r}"
-            )
+        _check_number("tolerance_scale", self.tolerance_scale, 1)
 
     def step_tolerances(self, rtol, atol, eps):
         """``(rtol, atol) / s`` with ``s = tolerance_scale``, the relative one kept
