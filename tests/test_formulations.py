@@ -275,6 +275,9 @@ def test_check_scene_by_object_or_name_and_its_errors():
     (dict(tolerance_scale=0.5), "tolerance_scale must be a number >= 1"),
     (dict(tolerance_scale=float("inf")), "tolerance_scale must be a number >= 1"),
     (dict(tolerance_scale="6"), "tolerance_scale must be a number >= 1"),
+    (dict(acceptance=0.9), "acceptance must be a number >= 1"),
+    (dict(acceptance=float("nan")), "acceptance must be a number >= 1"),
+    (dict(acceptance=False), "acceptance must be a number >= 1"),
 ])
 def test_quaternion_acceleration_refuses_bad_options(options, match):
     with pytest.raises(ValueError, match=match):

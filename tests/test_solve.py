@@ -262,3 +262,33 @@ def test_starting_step_is_hairers_on_the_vector_scale():
     d2 = rms(f(h0, y0n + h0 * f0) - f0) / h0
     h1 = (0.01 / max(d1, d2)) ** (1 / 8)
     np.testing.assert_allclose(float(t1), min(100 * h0, h1), rtol=1e-12)
+
+
+def test_acceptance_keeps_more_steps_and_chooses_every_step_as_before():
+    """A controller with ``acceptance = c`` keeps a step whose scaled error is below ``c``
+    (not 1) and proposes the same next step as diffrax's rule (``c = 1``) for the same
+    error history; the second-order form's controller gets the form's ``acceptance``,
+    the ``(q, ω)`` form's stays at 1."""
+    from jrigid.formulations import QuaternionAcceleration, QuaternionOmega
+    from jrigid.solve import controller
+
+    ts = jnp.array([0.0, 10.0])
+    y0, y1 = jnp.array([1.0, 0.0, 0.0]), jnp.array([1.0, 0.1, 0.0])
+    c, prev = 4.6, 0.7  # the previous step's inverse scaled error under c = 1
+    plain = controller(ts, 1e-6, 1e-8)
+    wide = controller(ts, 1e-6, 1e-8, acceptance=c)
+    for error, kept in ((0.2, True), (0.9, True), (3.0, False), (6.0, False)):
+        y_error = jnp.full(3, error * 1e-6)  # scaled error `error` (|y| = 1, rtol 1e-6)
+        runs = []
+        for ctrl, inv in ((plain, prev), (wide, prev * c)):
+            state = (jnp.asarray(inv), jnp.asarray(1.0), jnp.asarray(False))
+            runs.append(ctrl.adapt_step_size(0.0, 0.5, y0, y1, None, y_error, 8, state))
+        (keep1, _, next1, *_), (keep_c, _, next_c, *_) = runs
+        assert bool(keep1) == kept and bool(keep_c) == (error < c)
+        if kept:
+            np.testing.assert_allclose(float(next_c), float(next1), rtol=1e-12)
+    for form, expected in ((QuaternionAcceleration(), 4.6), (QuaternionOmega(), 1.0)):
+        assert controller(ts, 1e-6, 1e-8, formulation=form).acceptance == expected
+    for bad in (0.5, float("nan"), True):
+        with pytest.raises(ValueError, match="acceptance must be a number >= 1"):
+            controller(ts, 1e-6, 1e-8, acceptance=bad)

@@ -241,9 +241,22 @@ class VectorPIDController(diffrax.PIDController):
         layout: the :class:`~jrigid.solve.flat.Flat` layout of a flat state, or ``None``
             when the state is the formulation's own pytree (each leaf its vectors along
             the last axis).
+        acceptance: ``c ≥ 1``, the scaled error below which a step is accepted
+            (diffrax's: 1). The safety factor is lowered with it, to
+            ``safety c^(−icoeff/k)`` (``k`` the solver's error order), so that the
+            error at which the PI controller neither grows nor shrinks the step,
+            ``safety^(k/icoeff)`` (0.06 at diffrax's safety 0.9, ``k = 8``), stays where
+            it is: every step is chosen as with ``c = 1``, and a step that overshoots
+            that error up to ``c / 0.06`` times is kept instead of redone.
     """
 
     layout: Flat | None = eqx.field(static=True, default=None)
+    acceptance: float = eqx.field(static=True, default=1.0)
+
+    def __check_init__(self):
+        c = self.acceptance
+        if isinstance(c, bool) or not isinstance(c, (int, float)) or not c >= 1:
+            raise ValueError(f"acceptance must be a number >= 1, got {c!r}")
 
     def _lengths(self, y):
         lengths = vector_lengths if self.layout is None else self.layout.lengths
@@ -294,8 +307,14 @@ class VectorPIDController(diffrax.PIDController):
     def adapt_step_size(self, t0, t1, y0, y1_candidate, args, y_error, error_order,
                         controller_state):
         y0, y1 = self._lengths(y0), self._lengths(y1_candidate)
-        return super().adapt_step_size(t0, t1, y0, y1, args, y_error, error_order,
-                                       controller_state)
+        controller = self
+        if self.acceptance != 1:
+            c, k = self.acceptance, self._get_error_order(error_order)
+            y_error = jax.tree_util.tree_map(lambda e: e / c, y_error)
+            controller = eqx.tree_at(lambda s: s.safety, self,
+                                     self.safety * c ** (-self.icoeff / k))
+        return super(VectorPIDController, controller).adapt_step_size(
+            t0, t1, y0, y1, args, y_error, error_order, controller_state)
 
 
 #: The PI coefficients of :func:`controller`. On the free rotor, the rotor near its
@@ -325,6 +344,7 @@ def controller(ts, rtol, atol, norm=None, layout=None, cls=None, formulation=Non
     eps = jnp.finfo(ts.dtype).eps
     if formulation is not None:
         rtol, atol = formulation.step_tolerances(rtol, atol, eps)
+        fields = dict(fields, acceptance=formulation.step_acceptance())
     extra = {} if norm is None else {"norm": norm}
     return (VectorPIDController if cls is None else cls)(
         rtol=rtol,
