@@ -184,10 +184,10 @@ class QuaternionAcceleration(AbstractFormulation):
             ``(q, ω)`` form integrates ω by an equation of its own; at the same tolerance
             its error was 1.7–7.9× that form's on the nearly symmetric body, near the
             separatrix and on Hairer's rigid body (``docs/benchmarks.md``). ``s = 6``
-            brings it within 1.4× of it on those cases (but near the separatrix at
-            ε = 1e-6 from rtol 1e-10, where the error does not follow the tolerance), for
-            ``6^(1/9) ≈ 1.2×`` the steps at a given rtol; the steps at a given error are
-            unchanged (the error is proportional to the tolerance). 1 turns it off.
+            (with the default ``acceptance``) brings it within 1.9× of it on every hard
+            case from rtol 1e-4 to 1e-12, for ``6^(1/9) ≈ 1.2×`` the steps at a given
+            rtol; the steps at a given error are unchanged (the error is proportional to
+            the tolerance). 1 turns it off.
         acceptance: ``c ≥ 1``: jrigid's step-size controller keeps a step whose
             scaled error is below ``c`` instead of 1, choosing every step as before
             (:attr:`~jrigid.solve.stepping.VectorPIDController.acceptance`): fewer
