@@ -417,8 +417,9 @@ def simulate(
             (``tolerance_scale`` of
             :class:`~jrigid.formulations.QuaternionAcceleration`): its error at a given
             rtol is then about the ``quaternion_omega`` form's (measured on the hard
-            cases of ``benchmarks/hard_cases.py`` from rtol 1e-4 to 1e-12: within
-            0.13·rtol to 1e-10, and within 1.9× that form's error).
+            cases of ``benchmarks/hard_cases.py`` at rtol 1e-4, 1e-6, …, 1e-12: within
+            0.13·rtol to 1e-10, and within 1.9× that form's error; near the separatrix
+            at ε = 1e-6 around rtol 1e-10 the error jumps between 0.04 and 0.5·rtol).
             ``rtol`` must be finite, ``> 0`` and at least ``10 eps``. In float32 a
             :class:`~jrigid.solve.PrecisionWarning` says when the horizon is too long
             for ``rtol`` (:func:`jrigid.solve.precision_problem`; concrete inputs only).

@@ -278,7 +278,7 @@ def test_acceptance_keeps_more_steps_and_chooses_every_step_as_before():
     plain = controller(ts, 1e-6, 1e-8)
     wide = controller(ts, 1e-6, 1e-8, acceptance=c)
     for error, kept in ((0.2, True), (0.9, True), (3.0, False), (6.0, False)):
-        y_error = jnp.full(3, error * 1e-6)  # scaled error `error` (|y| = 1, rtol 1e-6)
+        y_error = jnp.full(3, error * 1e-6)  # scaled error about `error` (|y| ≈ 1, rtol 1e-6)
         runs = []
         for ctrl, inv in ((plain, prev), (wide, prev * c)):
             state = (jnp.asarray(inv), jnp.asarray(1.0), jnp.asarray(False))
