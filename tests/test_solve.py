@@ -292,3 +292,24 @@ def test_acceptance_keeps_more_steps_and_chooses_every_step_as_before():
     for bad in (0.5, float("nan"), True):
         with pytest.raises(ValueError, match="acceptance must be a number >= 1"):
             controller(ts, 1e-6, 1e-8, acceptance=bad)
+
+
+def test_a_step_proposed_at_dtmin_ends_the_solve():
+    """A proposal exactly at ``dtmin`` (the times are rounded, so one can land there) is
+    reported as ``dt_min_reached``: diffrax would keep every later step of that size
+    whatever its error (a singular solution then ran into NaN and the step budget)."""
+    import diffrax
+
+    from jrigid.solve import controller
+
+    ts = jnp.array([0.0, 10.0])
+    ctrl = controller(ts, 1e-6, 1e-8)
+    dtmin = float(ctrl.dtmin)
+    y0, y1 = jnp.array([1.0, 0.0, 0.0]), jnp.array([1.0, 0.0, 0.0])
+    state = (jnp.asarray(1.0), jnp.asarray(1.0), jnp.asarray(False))
+    for error, expected in ((0.5e-6, diffrax.RESULTS.dt_min_reached),  # step stays at dtmin
+                            (1e-12, diffrax.RESULTS.successful)):  # step grows
+        keep, _, t_next, _, _, result = ctrl.adapt_step_size(
+            0.0, dtmin, y0, y1, None, jnp.full(3, error), 8, state)
+        assert bool(keep)
+        assert result == expected, (error, float(t_next) - dtmin)

@@ -313,8 +313,16 @@ class VectorPIDController(diffrax.PIDController):
             y_error = jax.tree_util.tree_map(lambda e: e / c, y_error)
             controller = eqx.tree_at(lambda s: s.safety, self,
                                      self.safety * c ** (-self.icoeff / k))
-        return super(VectorPIDController, controller).adapt_step_size(
-            t0, t1, y0, y1, args, y_error, error_order, controller_state)
+        keep, t_next0, t_next1, jump, state, result = super(
+            VectorPIDController, controller
+        ).adapt_step_size(t0, t1, y0, y1, args, y_error, error_order, controller_state)
+        if self.dtmin is not None and not self.force_dtmin:
+            # diffrax reports a proposal below dtmin; one that lands on it exactly (the
+            # times are rounded: dtmin is a few ulps of t) would instead be accepted
+            # whatever its error, step after step, until the state is NaN
+            at_dtmin = state[2]
+            result = diffrax.RESULTS.where(at_dtmin, diffrax.RESULTS.dt_min_reached, result)
+        return keep, t_next0, t_next1, jump, state, result
 
 
 #: The PI coefficients of :func:`controller`. On the free rotor, the rotor near its
@@ -338,8 +346,9 @@ def controller(ts, rtol, atol, norm=None, layout=None, cls=None, formulation=Non
     (:class:`~jrigid.solve.saving.SavingController`). With a ``formulation``, it works to
     that formulation's :meth:`~jrigid.formulations.AbstractFormulation.step_tolerances`.
 
-    ``dtmin`` is ``4 eps max(|t0|, |t1|)`` without forcing: a smaller step ends the solve
-    with ``dt_min_reached`` (:attr:`~jrigid.trajectory.Result.step_size_collapse` or ``nonfinite``).
+    ``dtmin`` is ``4 eps max(|t0|, |t1|)`` without forcing: a step proposed at or below
+    it ends the solve with ``dt_min_reached``
+    (:attr:`~jrigid.trajectory.Result.step_size_collapse` or ``nonfinite``).
     """
     eps = jnp.finfo(ts.dtype).eps
     if formulation is not None:
