@@ -8,6 +8,7 @@ same message is raised at run time through ``equinox.error_if``.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 
 import equinox as eqx
@@ -84,6 +85,14 @@ def float_dtype() -> np.dtype:
     """JAX's default floating dtype: ``float64`` with ``jax_enable_x64``, else ``float32``
     (what ``jnp.result_type(float)`` returns, in a tenth of its time)."""
     return np.dtype(np.float64 if jax.config.jax_enable_x64 else np.float32)
+
+
+def check_number(name: str, value, low: float) -> None:
+    """``ValueError`` naming ``name`` unless ``value`` (a static option) is a finite real
+    number, not a bool, ``>= low``."""
+    number = isinstance(value, (int, float)) and not isinstance(value, bool)
+    if not (number and math.isfinite(value) and value >= low):
+        raise ValueError(f"{name} must be a number >= {low}, got {value!r}")
 
 
 def is_traced(*trees) -> bool:

@@ -48,7 +48,6 @@ rejected).
 from __future__ import annotations
 
 import functools
-import math
 from typing import ClassVar
 
 import diffrax
@@ -58,6 +57,7 @@ import jax.numpy as jnp
 
 from jrigid import linalg
 from jrigid import quaternion as quat
+from jrigid._checks import check_number
 from jrigid.invariants import Invariants, restore
 from jrigid.scene import Scene
 from jrigid.state import Kinematics, State, omega_from_rate
@@ -157,12 +157,7 @@ class AbstractFormulation(eqx.Module):
 
 
 def _check_number(name: str, value, low: float) -> None:
-    """``ValueError`` unless ``value`` is a finite real number (not a bool) ``>= low``."""
-    number = isinstance(value, (int, float)) and not isinstance(value, bool)
-    if not (number and math.isfinite(value) and value >= low):
-        raise ValueError(
-            f"QuaternionAcceleration {name} must be a number >= {low}, got {value!r}"
-        )
+    check_number(f"QuaternionAcceleration {name}", value, low)
 
 
 class QuaternionAcceleration(AbstractFormulation):

@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jrigid._checks import is_traced
+from jrigid._checks import check_number, is_traced
 from jrigid.formulations import AbstractFormulation
 from jrigid.invariants import Invariants
 from jrigid.solve.flat import Flat, vector_lengths
@@ -254,9 +254,7 @@ class VectorPIDController(diffrax.PIDController):
     acceptance: float = eqx.field(static=True, default=1.0)
 
     def __check_init__(self):
-        c = self.acceptance
-        if isinstance(c, bool) or not isinstance(c, (int, float)) or not c >= 1:
-            raise ValueError(f"acceptance must be a number >= 1, got {c!r}")
+        check_number("acceptance", self.acceptance, 1)
 
     def _lengths(self, y):
         lengths = vector_lengths if self.layout is None else self.layout.lengths
