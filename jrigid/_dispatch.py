@@ -99,12 +99,14 @@ def one_kernel(fn):
     import jax
     import jax.numpy as jnp
 
+    traced = jax.jit(fn)  # traced once: the loop's body reuses the shapes' trace
+
     def looped(*args):
-        shapes = jax.eval_shape(fn, *args)
+        shapes = jax.eval_shape(traced, *args)
         empty = jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), shapes)
         _, out = jax.lax.while_loop(
             lambda carry: ~carry[0],
-            lambda carry: (jnp.array(True), fn(*args)),
+            lambda carry: (jnp.array(True), traced(*args)),
             (jnp.array(False), empty),
         )
         return out
