@@ -81,7 +81,9 @@ from jrigid.solve.stepping import (  # DEFAULT_SOLVER: also named here
     interpolating_at,
     projected,
     run,
+    saved_times,
     solver_options,
+    unit_times,
 )
 from jrigid.state import State
 from jrigid.trajectory import Result, SimulationError, Trajectory  # noqa: F401  (also named here)
@@ -301,10 +303,12 @@ def _solve_arrays(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoin
         # What diffrax's ForwardMode does to the solver it is given, which it cannot do
         # through jrigid's wrappers: stages in a plain loop, which forward mode can enter.
         solver = dataclasses.replace(solver, scan_kind="lax")
+    # A solve saving by itself runs in unit time (jrigid.solve.run): its times are solve_ts.
+    solve_ts = unit_times(ts) if saves_itself else ts
     if not (user_saveat or dense or event is not None or formulation.event() is not None):
         # its dense output only saves at ts (and nowhere for the ends only: ts[:1] = t0
         # is inside no step)
-        solver = interpolating_at(solver, ts[:1] if ends_only else ts)
+        solver = interpolating_at(solver, solve_ts[:1] if ends_only else solve_ts)
     manifold, restore = project
     if manifold and formulation.carries_quaternion:
         invariants = Invariants.of(scene, state.q, state.omega) if restore else None
@@ -315,20 +319,24 @@ def _solve_arrays(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoin
         kind = "lax" if isinstance(adjoint, diffrax.ForwardMode) else "checkpointed"
         stepsize_controller = controller(
             ts, rtol, atol, layout=flat, cls=SavingController, formulation=formulation,
-            output_ts=ts,
+            unit_time=True, output_ts=solve_ts,
             interpolation_cls=solver.interpolation_cls, loop_kind=kind,
         )
     elif stepsize_controller is None:
-        stepsize_controller = controller(ts, rtol, atol, layout=flat, formulation=formulation)
+        stepsize_controller = controller(ts, rtol, atol, layout=flat, formulation=formulation,
+                                         unit_time=saves_itself)
     y0_flat = flat.ravel(y0)
     sol = run(flat, solver, ts, dt0, y0_flat, scene, saveat=saveat,
               stepsize_controller=stepsize_controller, adjoint=adjoint, max_steps=max_steps,
-              event=flat.event(formulation.event() if event is None else event))
+              event=flat.event(formulation.event() if event is None else event),
+              unit_time=saves_itself)
     saved_ts, ys = sol.ts, sol.ys
     if ends_only:  # (t0, t_end) → the layout of SaveAt(ts=ts, t1=True): (t0, t_end, t_end)
         saved_ts, ys = (jnp.concatenate([a, a[-1:]]) for a in (sol.ts, sol.ys))
     elif saves_itself:
-        saved_ts, ys = saved(sol, ts)
+        saved_ts, ys = saved(sol, solve_ts)
+    if saves_itself:
+        saved_ts = saved_times(saved_ts, ts)
     if projection is not None and not ends_only:
         # Interpolated outputs are projected here; the two ends are the initial state and
         # a step's result, both projected already (and projecting them again doubled the

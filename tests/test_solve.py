@@ -313,3 +313,77 @@ def test_a_step_proposed_at_dtmin_ends_the_solve():
             0.0, dtmin, y0, y1, None, jnp.full(3, error), 8, state)
         assert bool(keep)
         assert result == expected, (error, float(t_next) - dtmin)
+
+
+# --------------------------------------------------------------------------- unit time
+
+
+def _driven_scene():
+    """A body under a torque that depends on time (so a wrong clock shows)."""
+    from jrigid.body import RigidBody
+    from jrigid.scene import Scene, Torque
+
+    def drive(t, kin, amplitude):
+        return amplitude * jnp.stack([jnp.sin(t), 0.2 * kin.omega[1], jnp.cos(2.0 * t)])
+
+    return Scene(RigidBody(jnp.array([1.0, 2.0, 3.0])), loads=(Torque(drive, 0.3),))
+
+
+@pytest.mark.parametrize("solver_name", ["TightDop853", "Tsit5", "FusedDopri8", "FusedDop853",
+                                         "TightDop853-fused"])
+def test_a_solve_in_unit_time_takes_the_steps_of_the_solve_in_t(solver_name):
+    """``run(..., unit_time=True)`` (τ = (t − t0) / T from 0 to 1, what the default solve
+    runs) takes as many steps, reaches the same end state and interpolates the same
+    states as the solve in ``t``, for diffrax's and jrigid's solvers (the fused ones take
+    their increments from the term's control), with a field that depends on ``t``.
+
+    Not to rounding: an error estimate is a difference of nearly equal sums, so the
+    rounding of ``T (τ1 − τ0)`` against ``t1 − t0`` changes it by about 1e-6 of itself,
+    and the steps by about 1e-7 of theirs (up to 2e-4 with Dopri8's estimate): the states
+    agree to a hundredth of the tolerance."""
+    import diffrax
+
+    from jrigid.formulations import get_formulation
+    from jrigid.solve import Flat, controller, run, unit_times
+    from jrigid.solvers import FusedDop853, FusedDopri8, TightDop853
+
+    solver = {"TightDop853": TightDop853(), "Tsit5": diffrax.Tsit5(),
+              "FusedDopri8": FusedDopri8(), "FusedDop853": FusedDop853(),
+              "TightDop853-fused": TightDop853(fuse_below=10_000)}[solver_name]
+    formulation = get_formulation("quaternion_acceleration")
+    scene = _driven_scene()
+    y = formulation.from_state(scene, initial.from_omega(Q0, OMEGA0))
+    flat = Flat.of(formulation, y)
+    ts = jnp.array([2.0, 4.3, 7.0])
+    sols = []
+    for unit_time, times in ((False, ts), (True, unit_times(ts))):
+        sols.append(run(
+            flat, solver, ts, None, flat.ravel(y), scene,
+            saveat=diffrax.SaveAt(ts=times[1:2], t1=True),
+            stepsize_controller=controller(ts, 1e-8, 1e-10, layout=flat, unit_time=unit_time),
+            adjoint=diffrax.RecursiveCheckpointAdjoint(), max_steps=10_000,
+            unit_time=unit_time,
+        ))
+    in_t, in_unit = sols
+    assert in_t.result == in_unit.result == diffrax.RESULTS.successful
+    assert int(in_unit.stats["num_accepted_steps"]) == int(in_t.stats["num_accepted_steps"])
+    assert int(in_unit.stats["num_steps"]) == int(in_t.stats["num_steps"])
+    np.testing.assert_allclose(in_unit.ys, in_t.ys, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(unit_times(ts)[1:], in_unit.ts, rtol=1e-15)
+
+
+def test_the_default_solve_has_constant_ends():
+    """The default solve runs in unit time, so diffrax's rounding threshold for the end
+    (100 chained ``nextafter`` on ``t1``: about 1700 operations when ``t1`` is traced) is
+    folded by XLA and is not in the compiled program; a solve in ``t`` has it."""
+    import diffrax
+
+    state = initial.from_omega(Q0, OMEGA0)
+    ts = jnp.linspace(0.0, 10.0, 5)
+
+    def compiled(**options):
+        solve = jax.jit(lambda s: simulate(free_scene(), s, ts, **options).q)
+        return solve.lower(state).compile().as_text()
+
+    assert compiled().count("nextafter") < 10
+    assert compiled(saveat=diffrax.SaveAt(ts=ts)).count("nextafter") >= 100

@@ -44,7 +44,15 @@ from jrigid.invariants import Invariants
 from jrigid.scene import Scene
 from jrigid.solve.inputs import input_checks, normalised, prepare, screen
 from jrigid.solve.outcome import finish, raise_on_failure
-from jrigid.solve.stepping import controller, interpolating_at, projected, run, solver_options
+from jrigid.solve.stepping import (
+    controller,
+    interpolating_at,
+    projected,
+    run,
+    saved_times,
+    solver_options,
+    unit_times,
+)
 from jrigid.state import State
 from jrigid.trajectory import Trajectory
 
@@ -121,8 +129,9 @@ def _solve(scene, states, ts, rtol, atol, dt0, formulation, solver, adjoint, max
     states = jax.vmap(normalised)(states)
     y0 = _over_members(lambda sc, s: formulation.from_state(sc, s), scene_axis)(scene, states)
     batched = _Batched(formulation, scene_axis)
-    saveat = diffrax.SaveAt(ts=ts, t1=True)
-    solver = interpolating_at(solver, ts)
+    solve_ts = unit_times(ts)  # the solve runs in unit time (jrigid.solve.run)
+    saveat = diffrax.SaveAt(ts=solve_ts, t1=True)
+    solver = interpolating_at(solver, solve_ts)
     if project:
         invariants = None
         if scene.torque_free or scene.conservative_top:
@@ -132,13 +141,14 @@ def _solve(scene, states, ts, rtol, atol, dt0, formulation, solver, adjoint, max
         solver = projected(solver, batched, invariants)
     sol = run(batched, solver, ts, dt0, y0, scene, saveat=saveat,
               stepsize_controller=controller(ts, rtol, atol, norm=_max_member_rms,
-                                             formulation=formulation),
-              adjoint=adjoint, max_steps=max_steps)
+                                             formulation=formulation, unit_time=True),
+              adjoint=adjoint, max_steps=max_steps, unit_time=True)
+    saved_ts = saved_times(sol.ts, ts)
     ys = solver.outputs(sol.ys, scene, y0) if project else sol.ys
     ys = jax.tree_util.tree_map(lambda a: jnp.moveaxis(a, 1, 0), ys)  # (N, T + 1, ...)
 
     def one(sc, y, bad):
-        return finish(sc, formulation, ts, sol.ts, y, sol.result, sol.stats, invalid=bad)
+        return finish(sc, formulation, ts, saved_ts, y, sol.result, sol.stats, invalid=bad)
 
     traj = jax.vmap(one, in_axes=(scene_axis, 0, 0))(scene, ys, invalid)
     return traj, cause, messages

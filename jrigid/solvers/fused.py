@@ -84,12 +84,14 @@ class StageInterpolation(diffrax.AbstractLocalInterpolation):
     """Dense output of one step from its stages (abstract).
 
     Subclasses hold the step's ``t0``, ``t1`` and what they need of diffrax's
-    ``dense_info`` (``y0``, ``y1``, the stages ``f``), and give the state at ``t0 + θh``
-    in :meth:`point`; ``evaluate`` is diffrax's interface over it.
+    ``dense_info`` (``y0``, ``y1``, the stages ``f``, the step's control ``h``), and give
+    the state at ``t0 + θ (t1 − t0)`` in :meth:`point`; ``evaluate`` is diffrax's
+    interface over it.
     """
 
     def point(self, h, theta):
-        """The state at ``t0 + θ h`` (``h = t1 − t0``; ``θ`` a scalar in ``[0, 1]``)."""
+        """The state at ``t0 + θ (t1 − t0)`` (``h``: the step's control, its increment is
+        ``h Σ bᵢ fᵢ``; ``θ`` a scalar in ``[0, 1]``)."""
         raise NotImplementedError
 
     def evaluate(self, t0, t1=None, left=True):
@@ -99,8 +101,9 @@ class StageInterpolation(diffrax.AbstractLocalInterpolation):
             return jax.tree_util.tree_map(
                 lambda a, b: a - b, self.evaluate(t1), self.evaluate(t0)
             )
-        h = self.t1 - self.t0  # pyright: ignore
-        return self.point(h, (t0 - self.t0) / jnp.where(h == 0, 1, h))  # pyright: ignore
+        span = self.t1 - self.t0  # pyright: ignore
+        h = span if self.h is None else self.h  # pyright: ignore
+        return self.point(h, (t0 - self.t0) / jnp.where(span == 0, 1, span))  # pyright: ignore
 
 
 class PolynomialInterpolation(StageInterpolation):
@@ -113,20 +116,24 @@ class PolynomialInterpolation(StageInterpolation):
         t0, t1: the step's end points.
         y0: the state at ``t0`` (the solver's pytree).
         f: the stage derivatives, the state's pytree with a leading stage axis ``s``.
+        h: the step's control (``t1 − t0`` when ``None``; a term of another time
+            than the solve's, :class:`~jrigid.solve.UnitTimeTerm`, scales it).
     """
 
     t0: jax.Array
     t1: jax.Array
     y0: object
     f: object
+    h: jax.Array | None
     coefficients: ClassVar[np.ndarray]
 
-    def __init__(self, *, t0, t1, y0, y1, f):
+    def __init__(self, *, t0, t1, y0, y1, f, h=None):
         del y1  # part of diffrax's interface; the polynomial ends at it by construction
         self.t0 = t0
         self.t1 = t1
         self.y0 = y0
         self.f = f
+        self.h = h
 
     def point(self, h, theta):
         dtype = jnp.result_type(theta)
@@ -174,7 +181,7 @@ class FusedRungeKutta(diffrax.AbstractAdaptiveSolver):
         def field(t, flat):
             return ravel_pytree(terms.vf(t, unravel(flat), args))[0].astype(flat.dtype)
 
-        h = t1 - t0
+        h = terms.contr(t0, t1)  # the increments' step (t1 − t0 for diffrax's ODETerm)
         f0 = jax.lax.cond(
             eqxi.unvmap_any(made_jump),
             lambda: field(t0, flat0),
@@ -182,14 +189,14 @@ class FusedRungeKutta(diffrax.AbstractAdaptiveSolver):
         )
         stages = [f0]
         # First-same-as-last: the last row's stage is evaluated at (t1, y1).
-        flat1 = _append_stages(field, t0, t1, flat0, stages, tab.a_lower, tab.c)
+        flat1 = _append_stages(field, t0, t1, h, flat0, stages, tab.a_lower, tab.c)
         error = self.error_estimate(h, stages)
         f1 = stages[-1]
         if self.extra_stages:
             rows, cs = zip(*self.extra_stages, strict=True)
-            _append_stages(field, t0, t1, flat0, stages, rows, cs)
+            _append_stages(field, t0, t1, h, flat0, stages, rows, cs)
         dense_info = dict(
-            y0=y0, y1=unravel(flat1), f=jax.vmap(unravel)(jnp.stack(stages))
+            y0=y0, y1=unravel(flat1), f=jax.vmap(unravel)(jnp.stack(stages)), h=h
         )
         return (
             unravel(flat1),
@@ -200,14 +207,13 @@ class FusedRungeKutta(diffrax.AbstractAdaptiveSolver):
         )
 
 
-def _append_stages(field, t0, t1, flat0, stages, rows, cs):
-    """Evaluate the stages of ``rows`` (coefficients over ``stages``) at nodes ``cs``,
-    appending each to ``stages``; return the state of the last one."""
-    h = t1 - t0
+def _append_stages(field, t0, t1, h, flat0, stages, rows, cs):
+    """Evaluate the stages of ``rows`` (coefficients over ``stages``, step ``h``) at nodes
+    ``cs`` of ``t0 → t1``, appending each to ``stages``; return the state of the last one."""
     y_stage = flat0
     for row, c in zip(rows, cs, strict=True):
         y_stage = _combination(flat0, h, row, stages)
-        t_stage = t1 if float(c) == 1.0 else t0 + float(c) * h
+        t_stage = t1 if float(c) == 1.0 else t0 + float(c) * (t1 - t0)
         # A barrier per stage: XLA would otherwise fuse a stage's vector field into
         # every later stage that uses it, recomputing it (measured: up to 4x slower).
         stages.append(jax.lax.optimization_barrier(field(t_stage, y_stage)))

@@ -123,6 +123,7 @@ class _Dop853Dense(StageInterpolation):
     y0: object
     y1: object
     f: object
+    h: jax.Array | None = None
 
     def point(self, h, x):
         u = 1 - x

@@ -142,7 +142,7 @@ class TightDop853(diffrax.AbstractERK):
             y1, y_error, dense_info, solver_state, result = _FUSED.step(
                 terms, t0, t1, y0, args, solver_state, made_jump
             )
-            h = t1 - t0
+            h = dense_info["h"]
             k = jax.tree_util.tree_map(lambda f: (h * f).astype(f.dtype), dense_info["f"])
         else:
             y1, e5, dense_info, solver_state, result = super().step(
