@@ -135,6 +135,28 @@ def test_dop853_step_error_and_dense_output_are_scipys(solver, factor):
         np.testing.assert_allclose(interp.evaluate(t), dense(t), rtol=0, atol=1e-14)
 
 
+def test_dop853_coefficients_are_scipys_without_importing_scipy_integrate():
+    """jrigid loads scipy's coefficient file on its own (importing ``scipy.integrate``
+    costs a first solve 0.2–0.5 s): the same numbers as scipy's module, and a fresh
+    process that imports the default solver does not import ``scipy.integrate``."""
+    import subprocess
+    import sys
+
+    from scipy.integrate._ivp import dop853_coefficients as scipys
+
+    from jrigid.solvers._dop853_coefficients import coefficients as ours
+
+    for name in ("A", "B", "C", "E3", "E5", "D"):
+        np.testing.assert_array_equal(getattr(ours, name), getattr(scipys, name))
+    for name in ("N_STAGES", "N_STAGES_EXTENDED", "INTERPOLATOR_POWER"):
+        assert getattr(ours, name) == getattr(scipys, name)
+    code = ("import sys, jrigid.integrate, jrigid.solvers; "
+            "print('scipy.integrate' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True)
+    assert out.stdout.strip() == "False"
+
+
 def test_tight_dop853_takes_the_steps_of_dop853_at_tolerances_divided_by_its_factor():
     tight = solve(TightDop853())
     fused = solve(FusedDop853(), stepsize_controller=diffrax.PIDController(rtol=1e-10,

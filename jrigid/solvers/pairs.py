@@ -9,8 +9,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from numpy.polynomial import Polynomial
-from scipy.integrate._ivp import dop853_coefficients as _dop853
 
+from jrigid.solvers._dop853_coefficients import coefficients as _dop853
 from jrigid.solvers.fused import (
     FusedRungeKutta,
     PolynomialInterpolation,

@@ -11,8 +11,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy.integrate._ivp import dop853_coefficients as _dop853
 
+from jrigid.solvers._dop853_coefficients import coefficients as _dop853
 from jrigid.solvers.fused import in_precision, single
 from jrigid.solvers.pairs import (
     _E3_SINGLE,
