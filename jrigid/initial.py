@@ -34,6 +34,12 @@ from jrigid.state import State
 
 __all__ = ["from_euler_rates", "from_momentum_energy", "from_omega", "tilted"]
 
+# The helpers' arithmetic as compiled programs: run op by op, a process's first call
+# compiled one small program per operation (from_euler_rates: about 1 s).
+_derivative = jax.jit(quat.derivative)
+_rotate_inverse = jax.jit(quat.rotate_inverse)
+_normalize = jax.jit(quat.normalize)
+
 
 def unit_quaternion(q: ArrayLike, name: str = "q") -> jax.Array:
     """Validate and normalise an orientation quaternion.
@@ -50,16 +56,25 @@ def unit_quaternion(q: ArrayLike, name: str = "q") -> jax.Array:
         ValueError: wrong shape, non-finite entries, or zero norm.
     """
     q = check_shape(as_float(q), name, (4,), why=", a quaternion (w, x, y, z)")
-    q = fail_if(q, ~jnp.isfinite(q), f"{name} has non-finite entries (NaN or inf)")
-    q = fail_if(
-        q, ~(quat.norm(q) > 0), f"{name} is the zero quaternion: it represents no rotation"
-    )
-    return quat.normalize(q)
+    nonfinite, zero = _quaternion_flags(q)
+    q = fail_if(q, nonfinite, f"{name} has non-finite entries (NaN or inf)")
+    q = fail_if(q, zero, f"{name} is the zero quaternion: it represents no rotation")
+    return _normalize(q)
+
+
+@jax.jit
+def _quaternion_flags(q):
+    return ~jnp.all(jnp.isfinite(q)), ~jnp.all(quat.norm(q) > 0)
+
+
+@jax.jit
+def _nonfinite(x):
+    return ~jnp.all(jnp.isfinite(x))
 
 
 def _vector(x: ArrayLike, name: str) -> jax.Array:
     x = check_shape(as_float(x), name, (3,))
-    return fail_if(x, ~jnp.isfinite(x), f"{name} has non-finite entries (NaN or inf)")
+    return fail_if(x, _nonfinite(x), f"{name} has non-finite entries (NaN or inf)")
 
 
 def _translation(x, v):
@@ -115,8 +130,8 @@ def from_omega(
     x, v = _translation(x, v)
     q0, omega, x, v = _broadcast("from_omega", q0=q0, omega=omega, x=x, v=v)
     if frame == "space":
-        omega = quat.rotate_inverse(q0, omega)
-    return State(q0, quat.derivative(q0, omega), x, v)
+        omega = _rotate_inverse(q0, omega)
+    return State(q0, _derivative(q0, omega), x, v)
 
 
 def euler_rates_to_omega(angles: ArrayLike, rates: ArrayLike) -> jax.Array:
@@ -167,8 +182,14 @@ def from_euler_rates(
     """
     angles, rates = _vector(angles, "angles"), _vector(rates, "rates")
     angles, rates = _broadcast("from_euler_rates", angles=angles, rates=rates)
-    q0 = quat.from_euler("ZXZ", angles)
-    return from_omega(q0, euler_rates_to_omega(angles, rates), x=x, v=v)
+    q0, omega = _euler_pose(angles, rates)
+    return from_omega(q0, omega, x=x, v=v)
+
+
+@jax.jit
+def _euler_pose(angles, rates):
+    """``(q, ω)`` of ZXZ Euler angles and their rates, as one compiled program."""
+    return quat.from_euler("ZXZ", angles), euler_rates_to_omega(angles, rates)
 
 
 def _shortest_arc(a: jax.Array, b: jax.Array) -> jax.Array:
