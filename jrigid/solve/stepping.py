@@ -254,7 +254,8 @@ class VectorPIDController(diffrax.PIDController):
         time_scale: ``T`` for a solve in unit time ``τ = (t − t0) / T`` (:func:`run` with
             ``unit_time=True``), ``None`` for a solve in ``t``. The starting step is
             then chosen in ``t`` (Hairer's rule depends on the unit of time), so that
-            every step is the one of the solve in ``t``.
+            the steps are those of the solve in ``t`` (to the rounding of their error
+            estimates: about 1e-7 of a step).
     """
 
     layout: Flat | None = eqx.field(static=True, default=None)
@@ -356,7 +357,7 @@ def controller(ts, rtol, atol, norm=None, layout=None, cls=None, formulation=Non
     default RMS unless given; ``cls`` a subclass to build instead, with its own ``fields``
     (:class:`~jrigid.solve.saving.SavingController`). With a ``formulation``, it works to
     that formulation's :meth:`~jrigid.formulations.AbstractFormulation.step_tolerances`.
-    With ``unit_time``, it steps a solve in unit time (:func:`run`), with the same steps.
+    With ``unit_time``, it steps a solve in unit time (:func:`run`) as it would in ``t``.
 
     ``dtmin`` is ``4 eps max(|t0|, |t1|)`` without forcing: a step proposed at or below
     it ends the solve with ``dt_min_reached``
