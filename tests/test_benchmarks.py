@@ -14,6 +14,7 @@ import pytest
 BENCH = pathlib.Path(__file__).resolve().parents[1] / "benchmarks"
 sys.path.insert(0, str(BENCH))
 
+import first_call  # noqa: E402
 import harness  # noqa: E402
 import outputs  # noqa: E402
 import speed_vs_error as sve  # noqa: E402
@@ -153,6 +154,18 @@ def test_quick_run_produces_table_plot_and_finite_errors(tmp_path):
     tte = data["problems"]["free_rotor"]["summary"]["time_to_error"][sve.DEFAULT]
     assert tte["0.0001"]["seconds"] is not None
     assert out["markdown"] == md
+
+
+def test_first_call_splits_a_fresh_process_first_simulate(tmp_path):
+    first_call.main(["--runs", "1", "--out", str(tmp_path)])
+    assert "Largest first compile" in (tmp_path / "first_call.md").read_text()
+    runs = json.loads((tmp_path / "first_call.json").read_text())["runs"]
+    assert set(runs) == {"rotor", "top"}
+    for (run,) in runs.values():
+        assert all(run[c] > 0 for c in first_call.COLUMNS)
+        # the program's tracing, lowering and XLA compilation happen inside the first call
+        assert run["compile"] < run["first_simulate"]
+        assert run["second_simulate"] < 0.1 * run["first_simulate"]
 
 
 def test_outputs_quick_run_times_every_call_and_measures_its_error(tmp_path):
