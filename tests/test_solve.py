@@ -387,3 +387,24 @@ def test_the_default_solve_has_constant_ends():
 
     assert compiled().count("nextafter") < 10
     assert compiled(saveat=diffrax.SaveAt(ts=ts)).count("nextafter") >= 100
+
+
+def test_derivative_with_respect_to_the_end_time_is_the_field_there():
+    """The ends enter the unit-time solve through its start and span: d ω(T) / dT of the
+    default solve is Euler's ω̇ at T (torque free: ω̇ = I⁻¹ (Iω × ω)), and d ω(T) / d t0
+    agrees with a central difference."""
+    moments = jnp.array([1.0, 2.0, 3.0])
+    state = initial.from_omega(Q0, OMEGA0)
+
+    def final_omega(t0, t1):
+        scene = free_scene()
+        return simulate(scene, state, jnp.stack([t0, 0.5 * (t0 + t1), t1]), rtol=1e-11,
+                        atol=1e-13).omega[-1]
+
+    t0, t1 = jnp.asarray(0.3), jnp.asarray(4.0)
+    d_t0, d_t1 = jax.jacfwd(final_omega, argnums=(0, 1))(t0, t1)
+    w = final_omega(t0, t1)
+    np.testing.assert_allclose(d_t1, jnp.cross(moments * w, w) / moments, atol=1e-9)
+    h = 1e-5
+    fd = (final_omega(t0 + h, t1) - final_omega(t0 - h, t1)) / (2 * h)
+    np.testing.assert_allclose(d_t0, fd, atol=1e-7)
