@@ -408,3 +408,17 @@ def test_derivative_with_respect_to_the_end_time_is_the_field_there():
     h = 1e-5
     fd = (final_omega(t0 + h, t1) - final_omega(t0 - h, t1)) / (2 * h)
     np.testing.assert_allclose(d_t0, fd, atol=1e-7)
+
+
+def test_unit_times_refuse_what_they_cannot_map():
+    from jrigid.solve import saved_times, unit_times
+
+    ts = jnp.array([1.0, 2.0, 5.0])
+    np.testing.assert_array_equal(unit_times(ts), [0.0, 0.25, 1.0])
+    np.testing.assert_array_equal(saved_times(jnp.array([0.0, 0.25, jnp.inf, 0.5]), ts),
+                                  [1.0, 2.0, jnp.inf, 3.0])
+    for bad in (jnp.array(1.0), jnp.array([1.0]), jnp.ones((2, 2))):
+        with pytest.raises(ValueError, match="shape \\(T,\\) with T >= 2"):
+            unit_times(bad)
+    with pytest.raises(ValueError, match="shape \\(T \\+ 1,\\)"):
+        saved_times(jnp.zeros(3), ts)

@@ -280,8 +280,8 @@ class VectorPIDController(diffrax.PIDController):
         that it is compiled once here."""
         y0, args = jax.lax.stop_gradient((y0, args))
         tree_map = jax.tree_util.tree_map
-        if self.time_scale is not None:  # chosen in t (func is dy/dt): τ = t0 + h / T
-            time_scale = jax.lax.stop_gradient(self.time_scale)
+        # chosen in t (func is dy/dt); a solve in unit time steps h / T
+        time_scale = None if self.time_scale is None else jax.lax.stop_gradient(self.time_scale)
         scale = tree_map(lambda n: self.atol + self.rtol * n, self._lengths(y0))
 
         def scaled_norm(v):
@@ -302,7 +302,7 @@ class VectorPIDController(diffrax.PIDController):
             return t0 + in_unit(h0), tree_map(lambda a, b: a + h0 * b, y0, f0), f0, f
 
         def in_unit(h):
-            return h if self.time_scale is None else h / time_scale
+            return h if time_scale is None else h / time_scale
 
         zeros = tree_map(lambda s: jnp.zeros(s.shape, s.dtype),
                          jax.eval_shape(lambda: func(terms, t0, y0, args)))
@@ -384,11 +384,21 @@ def controller(ts, rtol, atol, norm=None, layout=None, cls=None, formulation=Non
     )
 
 
+def _check_times(ts) -> None:
+    if jnp.ndim(ts) != 1 or jnp.shape(ts)[0] < 2:
+        raise ValueError(f"output times must have shape (T,) with T >= 2, got {jnp.shape(ts)}")
+
+
 def unit_times(ts) -> jax.Array:
     """``ts (T,)`` in the unit time of a solve over them, ``τ = (t − ts[0]) / (ts[-1] −
     ts[0])``, from exactly 0 to exactly 1 (:func:`run` with ``unit_time=True``; XLA may
     divide by multiplying with the reciprocal, which in float32 put ``ts[-1]`` at
-    ``1 − 6e-8``)."""
+    ``1 − 6e-8``).
+
+    Raises:
+        ValueError: ``ts`` is not one-dimensional with at least two times.
+    """
+    _check_times(ts)
     tau = jnp.clip((ts[1:-1] - ts[0]) / (ts[-1] - ts[0]), 0, 1)
     return jnp.concatenate([jnp.zeros_like(ts[:1]), tau, jnp.ones_like(ts[:1])])
 
@@ -397,7 +407,15 @@ def saved_times(saved, ts) -> jax.Array:
     """The saved times ``(T + 1,)`` of a solve in unit time over ``ts (T,)``, laid out as
     ``SaveAt(ts=ts, t1=True)`` lays them out (each output time reached, ``inf`` beyond,
     then the end), back in ``t``: the output times themselves, and the end exactly
-    ``ts[-1]`` when the solve finished."""
+    ``ts[-1]`` when the solve finished.
+
+    Raises:
+        ValueError: ``ts`` is not ``(T,)`` with ``T >= 2``, or ``saved`` not ``(T + 1,)``.
+    """
+    _check_times(ts)
+    if jnp.shape(saved) != (jnp.shape(ts)[0] + 1,):
+        raise ValueError(f"saved times must have shape (T + 1,) = ({jnp.shape(ts)[0] + 1},) "
+                         f"for ts of shape {jnp.shape(ts)}, got {jnp.shape(saved)}")
     reached = jnp.where(jnp.isfinite(saved[:-2]), ts[:-1], jnp.inf)
     tau = saved[-2:]
     t = jnp.where(tau == 1, ts[-1], ts[0] + (ts[-1] - ts[0]) * tau)
