@@ -149,18 +149,18 @@ def _segment(scene, formulation, solver, y0, t0, t1, rtol, atol, dt0, depth, max
         optx.Bisection(rtol=100 * eps, atol=root_atol, flip="detect"),
         direction=False,
     )
+    steps = controller(jnp.stack([t0, t1]), rtol, atol, formulation=formulation)
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(formulation.vector_field), solver, t0, t1, dt0, y0, args=scene,
-        saveat=diffrax.SaveAt(t1=True, dense=True),
-        stepsize_controller=controller(jnp.stack([t0, t1]), rtol, atol,
-                                       formulation=formulation),
-        event=event, max_steps=max_steps, throw=False,
+        saveat=diffrax.SaveAt(t1=True, dense=True, controller_state=True),
+        stepsize_controller=steps, event=event, max_steps=max_steps, throw=False,
     )  # fmt: skip
     R = diffrax.RESULTS
     # a bisection out of iterations still brackets the contact time to a few ulps of t
     hit = (sol.result == R.event_occurred) | (sol.result == R.nonlinear_max_steps_reached)
     y1 = jax.tree_util.tree_map(lambda a: a[-1], sol.ys)
-    failure = classify(sol.result, formulation, scene, y1, sol.ts[-1], sol.ys, t1 - t0)
+    failure = classify(sol.result, formulation, scene, y1, sol.ts[-1], sol.ys, t1 - t0,
+                       nonfinite_trials=steps.nonfinite_trials(sol.controller_state))
     code = jnp.where(sol.result == R.successful, 0, jnp.where(hit, 1, 10 + failure))
     return sol.ts[-1], y1, code, sol.interpolation, sol.stats["num_steps"]
 

@@ -1,8 +1,8 @@
 """Adaptive integration of a scene with diffrax: :func:`simulate`.
 
 One entry point, :func:`simulate`, over :func:`diffrax.diffeqsolve`. The default is
-Euler's equations in quaternion-acceleration form (17.50) with Hairer's DOP853 pair on
-diffrax's Runge–Kutta step (:class:`jrigid.solvers.TightDop853`: its error estimate
+Euler's equations in quaternion-acceleration form (17.50) with Hairer's DOP853 pair,
+its stages in one loop (:class:`jrigid.solvers.TightDop853`: its error estimate
 scaled by 10, so that the tolerances bound the error of the result over long runs, and
 an accurate 7th-order dense output), on the state raveled into one array, under a PID
 controller, and after every step
@@ -77,6 +77,7 @@ from jrigid.solve.saving import SavingController, SavingSolver, saved
 from jrigid.solve.stepping import (  # DEFAULT_SOLVER: also named here
     DEFAULT_SOLVER,  # noqa: F401
     ProjectedSolver,
+    VectorPIDController,
     controller,
     interpolating_at,
     projected,
@@ -325,6 +326,11 @@ def _solve_arrays(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoin
     elif stepsize_controller is None:
         stepsize_controller = controller(ts, rtol, atol, layout=flat, formulation=formulation,
                                          unit_time=saves_itself)
+    record = isinstance(stepsize_controller, VectorPIDController)
+    if record and not saveat.controller_state:  # its record of non-finite trial steps
+        saveat = diffrax.SaveAt(subs=saveat.subs, dense=saveat.dense,
+                                solver_state=saveat.solver_state, controller_state=True,
+                                made_jump=saveat.made_jump)
     y0_flat = flat.ravel(y0)
     sol = run(flat, solver, ts, dt0, y0_flat, scene, saveat=saveat,
               stepsize_controller=stepsize_controller, adjoint=adjoint, max_steps=max_steps,
@@ -344,15 +350,18 @@ def _solve_arrays(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoin
         ys = projection.outputs(ys, scene, y0_flat)
     ys = flat.states(ys)
     interpolation = flat.interpolation(sol.interpolation) if (dense or saveat.dense) else None
+    trials = stepsize_controller.nonfinite_trials(sol.controller_state) if record else None
     if user_saveat:
-        traj = _finish_saved(scene, formulation, ts, sol, ys, interpolation, invalid, event)
+        traj = _finish_saved(scene, formulation, ts, sol, ys, interpolation, invalid, event,
+                             trials)
     else:
         traj = finish(scene, formulation, ts, saved_ts, ys, sol.result, sol.stats,
-                      interpolation, invalid, user_event=event is not None)
+                      interpolation, invalid, user_event=event is not None,
+                      nonfinite_trials=trials)
     return traj, cause, messages
 
 
-def _finish_saved(scene, formulation, ts, sol, ys, interpolation, invalid, event):
+def _finish_saved(scene, formulation, ts, sol, ys, interpolation, invalid, event, trials):
     """The trajectory of a user's ``SaveAt``: its times as diffrax filled them (``inf``
     padding becomes NaN outputs); ``ys`` are the saved states as the formulation's
     variables."""
@@ -368,7 +377,7 @@ def _finish_saved(scene, formulation, ts, sol, ys, interpolation, invalid, event
     ys = jax.tree_util.tree_map(_mask, ys)
     filled = jax.tree_util.tree_map(lambda a: jnp.where(jnp.isnan(a), 0.0, a), ys)
     result = classify(sol.result, formulation, scene, y_end, t_end, filled, ts[-1] - ts[0],
-                      event is not None)
+                      event is not None, trials)
     result = jnp.where(invalid, jnp.int32(Result.invalid_input), result)
     stats = {k: sol.stats[k] for k in ("num_steps", "num_accepted_steps", "num_rejected_steps")}
     return Trajectory.build(scene, formulation, jnp.where(saved, sol.ts, jnp.nan), ys,

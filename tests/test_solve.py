@@ -281,7 +281,8 @@ def test_acceptance_keeps_more_steps_and_chooses_every_step_as_before():
         y_error = jnp.full(3, error * 1e-6)  # scaled error about `error` (|y| ≈ 1, rtol 1e-6)
         runs = []
         for ctrl, inv in ((plain, prev), (wide, prev * c)):
-            state = (jnp.asarray(inv), jnp.asarray(1.0), jnp.asarray(False))
+            state = ((jnp.asarray(inv), jnp.asarray(1.0), jnp.asarray(False)),
+                     jnp.asarray(False))
             runs.append(ctrl.adapt_step_size(0.0, 0.5, y0, y1, None, y_error, 8, state))
         (keep1, _, next1, *_), (keep_c, _, next_c, *_) = runs
         assert bool(keep1) == kept and bool(keep_c) == (error < c)
@@ -306,13 +307,34 @@ def test_a_step_proposed_at_dtmin_ends_the_solve():
     ctrl = controller(ts, 1e-6, 1e-8)
     dtmin = float(ctrl.dtmin)
     y0, y1 = jnp.array([1.0, 0.0, 0.0]), jnp.array([1.0, 0.0, 0.0])
-    state = (jnp.asarray(1.0), jnp.asarray(1.0), jnp.asarray(False))
+    state = ((jnp.asarray(1.0), jnp.asarray(1.0), jnp.asarray(False)), jnp.asarray(False))
     for error, expected in ((0.5e-6, diffrax.RESULTS.dt_min_reached),  # step stays at dtmin
                             (1e-12, diffrax.RESULTS.successful)):  # step grows
         keep, _, t_next, _, _, result = ctrl.adapt_step_size(
             0.0, dtmin, y0, y1, None, jnp.full(3, error), 8, state)
         assert bool(keep)
         assert result == expected, (error, float(t_next) - dtmin)
+
+
+def test_controller_records_nonfinite_trial_steps():
+    """The controller's state says whether a trial step since the last accepted one was
+    not finite (state or error estimate): what a collapsed step size is blamed on. An
+    accepted step clears the record; rejected finite trials after a non-finite one keep it."""
+    from jrigid.solve import controller
+
+    ctrl = controller(jnp.array([0.0, 10.0]), 1e-6, 1e-8)
+    _, state = ctrl.init(None, 0.0, 10.0, jnp.ones(3), 0.1, None, None, 8)
+    assert not bool(ctrl.nonfinite_trials(state))
+    y0 = jnp.array([1.0, 0.0, 0.0])
+    good, nan = jnp.array([1.0, 0.1, 0.0]), jnp.array([1.0, jnp.nan, 0.0])
+    history = []
+    for y1, error in ((good, 1e-3), (nan, 1e-3), (good, jnp.inf), (good, 1e-3),
+                      (good, 1e-12)):
+        keep, _, _, _, state, _ = ctrl.adapt_step_size(
+            0.0, 0.5, y0, y1, None, jnp.full(3, error), 8, state)
+        history.append((bool(keep), bool(ctrl.nonfinite_trials(state))))
+    assert history == [(False, False), (False, True), (False, True), (False, True),
+                       (True, False)]
 
 
 # --------------------------------------------------------------------------- unit time
@@ -387,6 +409,38 @@ def test_the_default_solve_has_constant_ends():
 
     assert compiled().count("nextafter") < 10
     assert compiled(saveat=diffrax.SaveAt(ts=ts)).count("nextafter") >= 100
+
+
+def _calls(jaxpr, name) -> int:
+    """How many calls of the jitted function ``name`` a jaxpr holds, inner jaxprs included."""
+    total = 0
+    for eqn in jaxpr.eqns:
+        total += eqn.primitive.name in ("pjit", "jit") and eqn.params.get("name") == name
+        for param in eqn.params.values():
+            for inner in param if isinstance(param, (tuple, list)) else (param,):
+                inner = getattr(inner, "jaxpr", inner)
+                if hasattr(inner, "eqns"):
+                    total += _calls(inner, name)
+    return total
+
+
+def test_the_default_solve_compiles_the_vector_field_twice():
+    """In the default solve's program the vector field appears twice: in the starting-step
+    rule and in the step's stage loop, which also holds the dense output's stages. A
+    collapsed step is blamed on NaN through the controller's record, not by probing the
+    field after the solve. (Each copy of a heavy top's field costs about 0.2 s of XLA
+    compilation.)"""
+    import diffrax
+
+    state = initial.from_omega(Q0, OMEGA0)
+    ts = jnp.linspace(0.0, 10.0, 5)
+
+    def copies(**options):
+        program = jax.make_jaxpr(lambda s: simulate(free_scene(), s, ts, **options).q)(state)
+        return _calls(program.jaxpr, "vector_field")
+
+    assert copies() == 2
+    assert copies(saveat=diffrax.SaveAt(ts=ts)) == 2
 
 
 def test_derivative_with_respect_to_the_end_time_is_the_field_there():

@@ -25,16 +25,41 @@ def _all_finite(tree) -> jax.Array:
     return jnp.all(jnp.stack([jnp.all(jnp.isfinite(a)) for a in leaves]))
 
 
-def classify(sol_result, formulation, scene, y_end, t_end, ys, span, user_event=False):
+def classify(sol_result, formulation, scene, y_end, t_end, ys, span, user_event=False,
+             nonfinite_trials=None):
     """Map diffrax's result to a :class:`~jrigid.trajectory.Result` code (``()`` int32).
 
-    A collapsed step size is blamed on non-finite values if the vector field is
-    non-finite at the last accepted state or at probes a little beyond it (rejected
-    trial steps are not kept, so their NaNs are not otherwise visible). An event is
-    :attr:`~jrigid.trajectory.Result.gimbal_lock` for a formulation's own event and
-    :attr:`~jrigid.trajectory.Result.event` when the user passed one (``user_event``).
+    A collapsed step size is blamed on non-finite values if the last accepted state is
+    not finite, or if ``nonfinite_trials`` (``()`` bool: jrigid's controller records
+    whether the trial steps since the last accepted one had non-finite values,
+    :meth:`~jrigid.solve.stepping.VectorPIDController.nonfinite_trials`) says so. Without
+    that record (a user's controller, or members of one shared solve), the vector field
+    is probed at the last accepted state and a little beyond it (rejected trial steps
+    are not kept, so their NaNs are not otherwise visible); the probe costs a copy of
+    the vector field in the compiled program (about 0.2 s of a heavy top's
+    compilation). An event is :attr:`~jrigid.trajectory.Result.gimbal_lock` for a
+    formulation's own event and :attr:`~jrigid.trajectory.Result.event` when the user
+    passed one (``user_event``).
     """
     R = diffrax.RESULTS
+    if nonfinite_trials is None:
+        finite = _probe(formulation, scene, y_end, t_end, span)
+    else:
+        finite = _all_finite(y_end) & ~nonfinite_trials
+    code = jnp.where(sol_result == R.max_steps_reached, Result.max_steps, Result.solver_failure)
+    code = jnp.where(
+        sol_result == R.dt_min_reached,
+        jnp.where(finite, Result.step_size_collapse, Result.nonfinite),
+        code,
+    )
+    event_code = Result.event if user_event else Result.gimbal_lock
+    code = jnp.where(sol_result == R.event_occurred, event_code, code)
+    ok = jnp.where(_all_finite(ys), Result.success, Result.nonfinite)
+    return jnp.where(sol_result == R.successful, ok, code).astype(jnp.int32)
+
+
+def _probe(formulation, scene, y_end, t_end, span) -> jax.Array:
+    """``()`` bool: ``y_end`` and the vector field at it and a little beyond are finite."""
     steps = jnp.asarray([0.0, 1e-12, 1e-8, 1e-4], jnp.result_type(t_end)) * span
 
     def probe(i, carry):
@@ -49,20 +74,11 @@ def classify(sol_result, formulation, scene, y_end, t_end, ys, span, user_event=
 
     zeros = jax.tree_util.tree_map(jnp.zeros_like, y_end)
     _, finite = jax.lax.fori_loop(0, 4, probe, (zeros, _all_finite(y_end)))
-    code = jnp.where(sol_result == R.max_steps_reached, Result.max_steps, Result.solver_failure)
-    code = jnp.where(
-        sol_result == R.dt_min_reached,
-        jnp.where(finite, Result.step_size_collapse, Result.nonfinite),
-        code,
-    )
-    event_code = Result.event if user_event else Result.gimbal_lock
-    code = jnp.where(sol_result == R.event_occurred, event_code, code)
-    ok = jnp.where(_all_finite(ys), Result.success, Result.nonfinite)
-    return jnp.where(sol_result == R.successful, ok, code).astype(jnp.int32)
+    return finite
 
 
 def finish(scene, formulation, ts, saved_ts, saved_ys, sol_result, sol_stats,
-           interpolation=None, invalid=None, user_event=False):
+           interpolation=None, invalid=None, user_event=False, nonfinite_trials=None):
     """One member's :class:`~jrigid.trajectory.Trajectory` from a diffrax solution.
 
     Args:
@@ -76,6 +92,7 @@ def finish(scene, formulation, ts, saved_ts, saved_ys, sol_result, sol_stats,
             invalid member's outputs are NaN and its code
             :attr:`~jrigid.trajectory.Result.invalid_input`.
         user_event: whether an event of the user's may have stopped the solve.
+        nonfinite_trials: ``()`` bool or ``None``: see :func:`classify`.
     """
     stats = {k: sol_stats[k] for k in ("num_steps", "num_accepted_steps", "num_rejected_steps")}
     # diffrax writes the final state into the first unfilled slot: on failure that is
@@ -93,7 +110,7 @@ def finish(scene, formulation, ts, saved_ts, saved_ys, sol_result, sol_stats,
 
     ys = jax.tree_util.tree_map(_mask, saved_ys)
     result = classify(sol_result, formulation, scene, y_end, t_end, ys, ts[-1] - ts[0],
-                      user_event)
+                      user_event, nonfinite_trials)
     if invalid is not None:
         result = jnp.where(invalid, jnp.int32(Result.invalid_input), result)
         t_end = jnp.where(invalid, ts[0], t_end)

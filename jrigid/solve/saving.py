@@ -29,7 +29,7 @@ import equinox.internal as eqxi
 import jax
 import jax.numpy as jnp
 
-from jrigid.solve.stepping import VectorPIDController, WrappedSolver
+from jrigid.solve.stepping import VectorPIDController, WrappedSolver, traced_once
 
 __all__ = ["SavingController", "SavingSolver", "saved"]
 
@@ -41,6 +41,7 @@ class SavingSolver(WrappedSolver):
     the inner solver's. Only for use with a :class:`SavingController`.
     """
 
+    @traced_once
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
         y1, y_error, dense_info, solver_state, result = self.solver.step(
             terms, t0, t1, y0, args, solver_state, made_jump
@@ -87,6 +88,7 @@ class SavingController(VectorPIDController):
         ys = jnp.full((self.output_ts.shape[0],) + jnp.shape(y0), jnp.nan, jnp.result_type(y0))
         return t_next, (state, ys.at[0].set(y0))
 
+    @traced_once
     def adapt_step_size(self, t0, t1, y0, y1_candidate, args, y_error, error_order,
                         controller_state):
         y_error, dense_info = y_error
@@ -109,6 +111,10 @@ class SavingController(VectorPIDController):
         _, ys = eqxi.while_loop(due, save, (first, ys), max_steps=n, buffers=lambda c: c[1],
                                 kind=self.loop_kind, checkpoints=n)
         return keep, t_prev, t_next, jump, (state, ys), result
+
+    def nonfinite_trials(self, controller_state) -> jax.Array:
+        """:meth:`VectorPIDController.nonfinite_trials` of this controller's state."""
+        return super().nonfinite_trials(controller_state[0])
 
 
 def saved(sol: diffrax.Solution, ts):

@@ -36,17 +36,28 @@ __all__ = [
     "run",
     "saved_times",
     "solver_options",
+    "traced_once",
     "unit_times",
 ]
 
 
 #: The solver of :func:`jrigid.simulate` and the other integrators when none is given
-#: (a class, instantiated per call): DOP853 on diffrax's generic step, its error
+#: (a class, instantiated per call): DOP853, its stages in one loop, its error
 #: estimate scaled by 10 (:class:`jrigid.solvers.TightDop853`). Measured against the
 #: Tsitouras 5(4) pair on the same form (``benchmarks/speed_vs_error.py``, free rotors
 #: and a heavy top): 0.98–3.1× as fast at equal error from 1e-6 to 1e-10 (0.69–1.6× at
 #: 1e-4), and more accurate per tolerance (final error 0.04–12·rtol against 0.2–70·rtol).
 DEFAULT_SOLVER = TightDop853
+
+
+def traced_once(method):
+    """``method`` (of a solver or a controller) as an ``equinox.filter_jit`` function:
+    traced once per input structure and then reused, and inlined into the program that
+    calls it. diffrax traces the body of its loop three times (once for its shapes,
+    twice in the loop itself); with the step and the step-size control traced once, the
+    default solve of a heavy top traced in 0.xx s instead of 0.xx s. The compiled program,
+    and so its speed, are unchanged."""
+    return eqx.filter_jit(method)
 
 
 class WrappedSolver(diffrax.AbstractWrappedSolver):
@@ -128,6 +139,7 @@ class ProjectedSolver(WrappedSolver):
     formulation: AbstractFormulation | Flat = eqx.field(static=True)
     invariants: Invariants | None = None
 
+    @traced_once
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
         y1, y_error, dense_info, solver_state, result = self.solver.step(
             terms, t0, t1, y0, args, solver_state, made_jump
@@ -272,7 +284,17 @@ class VectorPIDController(diffrax.PIDController):
     def init(self, terms, t0, t1, y0, dt0, args, func, error_order):
         if dt0 is None:
             dt0 = self._initial_step(terms, t0, y0, args, func, error_order)
-        return super().init(terms, t0, t1, y0, dt0, args, func, error_order)
+        t_next, state = super().init(terms, t0, t1, y0, dt0, args, func, error_order)
+        return t_next, (state, jnp.array(False))
+
+    def nonfinite_trials(self, controller_state) -> jax.Array:
+        """``()`` bool from this controller's final state (``diffrax.SaveAt(...,
+        controller_state=True)``): whether a trial step since the last accepted one had a
+        non-finite state or error estimate. A solve that ended with ``dt_min_reached``
+        and this flag collapsed on non-finite values
+        (:attr:`~jrigid.trajectory.Result.nonfinite`), otherwise on a step too small for
+        its error (:attr:`~jrigid.trajectory.Result.step_size_collapse`)."""
+        return controller_state[1]
 
     def _initial_step(self, terms, t0, y0, args, func, error_order):
         """Hairer's starting step (*Solving ODEs I*, II.4; diffrax's when ``dt0`` is
@@ -316,8 +338,11 @@ class VectorPIDController(diffrax.PIDController):
                        (0.01 / jnp.where(max_d <= 1e-15, 1.0, max_d)) ** (1 / order))
         return jax.lax.stop_gradient(in_unit(jnp.minimum(100 * h0, h1)))
 
+    @traced_once
     def adapt_step_size(self, t0, t1, y0, y1_candidate, args, y_error, error_order,
                         controller_state):
+        controller_state, nonfinite = controller_state
+        bad = ~(_finite(y1_candidate) & _finite(y_error))
         y0, y1 = self._lengths(y0), self._lengths(y1_candidate)
         controller = self
         if self.acceptance != 1:
@@ -334,7 +359,15 @@ class VectorPIDController(diffrax.PIDController):
             # whatever its error, step after step, until the state is NaN
             at_dtmin = state[2]
             result = diffrax.RESULTS.where(at_dtmin, diffrax.RESULTS.dt_min_reached, result)
-        return keep, t_next0, t_next1, jump, state, result
+        # what a collapse is blamed on: the trials since the last accepted step
+        nonfinite = (nonfinite & ~keep) | bad
+        return keep, t_next0, t_next1, jump, (state, nonfinite), result
+
+
+def _finite(tree) -> jax.Array:
+    """``()`` bool: every entry of every leaf of ``tree`` is finite."""
+    leaves = jax.tree_util.tree_leaves(tree)
+    return jnp.all(jnp.stack([jnp.all(jnp.isfinite(a)) for a in leaves]))
 
 
 #: The PI coefficients of :func:`controller`. On the free rotor, the rotor near its

@@ -13,9 +13,10 @@ and adjoints works with them as with diffrax's own.
   (inaccurate inside steps: see its docstring);
 - :class:`FusedDop853` — Hairer's DOP853 (scipy's ``DOP853``), 13 stages (FSAL) and 3
   more for its 7th-order dense output, error estimate from a 5th- and a 3rd-order one;
-- :class:`TightDop853` — the same pair on diffrax's own (generic) Runge–Kutta step, its
-  error estimate scaled by a factor (10): the default solver of :func:`jrigid.simulate`.
-  Its stages in diffrax's stage loop compile in about half the time of written-out ones
+- :class:`TightDop853` — the same pair with all of a step's stages (its dense output's
+  too) in one loop, as diffrax's generic Runge–Kutta step evaluates them, its error
+  estimate scaled by a factor (10): the default solver of :func:`jrigid.simulate`.
+  Its stages in a loop compile in about half the time of written-out ones
   (``fuse_below`` writes them out for small vector fields: 6–13 % faster per solve on a
   free rotor, 0.9–1.2 s more compilation).
 
