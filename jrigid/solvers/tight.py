@@ -163,15 +163,16 @@ class TightDop853(diffrax.AbstractERK):
             def dense_stages(k):
                 return _dense_stages(terms, t0, t1, y0, args, k)
 
-            k = jax.lax.cond(self._holds_output(t0, t1), dense_stages, lambda k: k, k)
+            if self.output_ts is None:
+                k = dense_stages(k)
+            else:
+                k = jax.lax.cond(self._holds_output(t0, t1), dense_stages, lambda k: k, k)
             return y1, y_error, dict(y0=y0, y1=y1, f=k), solver_state, result
         return self._looped_step(terms, t0, t1, y0, args, solver_state, made_jump)
 
-    def _holds_output(self, t0, t1) -> jax.Array | bool:
-        """Whether the step ``t0 → t1`` needs its dense output: an output time in
-        ``(t0, t1]`` (always, without :attr:`output_ts`)."""
-        if self.output_ts is None:
-            return True
+    def _holds_output(self, t0, t1) -> jax.Array:
+        """Whether the step ``t0 → t1`` holds one of the :attr:`output_ts` in ``(t0, t1]``
+        (``()`` bool; only with :attr:`output_ts`)."""
         ts = self.output_ts
         i = jnp.searchsorted(ts, t0, side="right")  # the first output time after t0
         return (i < ts.shape[0]) & (ts[jnp.minimum(i, ts.shape[0] - 1)] <= t1)
