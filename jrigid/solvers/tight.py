@@ -278,7 +278,7 @@ _ALL = _STAGES + _EXTRA
 def _stage_coefficients(cls):
     """``(a (16, 16), c (16,), b (13,), e5 (13,))`` of ``cls.tableau`` (in the precision
     it was rounded to) with the dense output's stages as rows 13–15 of ``a``: every
-    stage of a step as one table, for :meth:`TightDop853._looped_step`."""
+    stage of a step as one table, for ``TightDop853._looped_step``."""
     tab = cls.tableau
     a = np.zeros((_ALL, _ALL))
     for i, row in enumerate(tab.a_lower, start=1):
