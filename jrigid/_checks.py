@@ -81,6 +81,13 @@ def all_arrays(*trees) -> bool:
     return all(eqx.is_array(x) for x in jax.tree_util.tree_leaves(trees))
 
 
+def all_finite(tree) -> jax.Array:
+    """``()`` bool: every entry of every array leaf of ``tree`` is finite (True for a
+    tree without leaves)."""
+    leaves = jax.tree_util.tree_leaves(tree)
+    return jnp.all(jnp.stack([jnp.all(jnp.isfinite(a)) for a in leaves] or [jnp.array(True)]))
+
+
 def float_dtype() -> np.dtype:
     """JAX's default floating dtype: ``float64`` with ``jax_enable_x64``, else ``float32``
     (what ``jnp.result_type(float)`` returns, in a tenth of its time)."""

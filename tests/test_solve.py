@@ -476,3 +476,14 @@ def test_unit_times_refuse_what_they_cannot_map():
             unit_times(bad)
     with pytest.raises(ValueError, match="shape \\(T \\+ 1,\\)"):
         saved_times(jnp.zeros(3), ts)
+
+
+def test_nonfinite_trials_refuses_a_state_that_is_not_the_controllers():
+    """Reading the record from a solve that did not save the controller's state (``None``)
+    or from another controller's state is an error that names the remedy."""
+    from jrigid.solve import controller
+
+    ctrl = controller(jnp.array([0.0, 10.0]), 1e-6, 1e-8)
+    for bad in (None, (jnp.asarray(1.0), jnp.asarray(1.0), jnp.asarray(False))):
+        with pytest.raises(ValueError, match="controller_state=True"):
+            ctrl.nonfinite_trials(bad)

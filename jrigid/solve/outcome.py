@@ -14,15 +14,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jrigid._checks import all_finite
 from jrigid.solve.inputs import message
 from jrigid.trajectory import CAUSES, Result, SimulationError, Trajectory
 
 __all__ = ["classify", "finish", "finish_sampled", "raise_on_failure"]
-
-
-def _all_finite(tree) -> jax.Array:
-    leaves = jax.tree_util.tree_leaves(tree)
-    return jnp.all(jnp.stack([jnp.all(jnp.isfinite(a)) for a in leaves]))
 
 
 def classify(sol_result, formulation, scene, y_end, t_end, ys, span, user_event=False,
@@ -45,7 +41,7 @@ def classify(sol_result, formulation, scene, y_end, t_end, ys, span, user_event=
     if nonfinite_trials is None:
         finite = _probe(formulation, scene, y_end, t_end, span)
     else:
-        finite = _all_finite(y_end) & ~nonfinite_trials
+        finite = all_finite(y_end) & ~nonfinite_trials
     code = jnp.where(sol_result == R.max_steps_reached, Result.max_steps, Result.solver_failure)
     code = jnp.where(
         sol_result == R.dt_min_reached,
@@ -54,7 +50,7 @@ def classify(sol_result, formulation, scene, y_end, t_end, ys, span, user_event=
     )
     event_code = Result.event if user_event else Result.gimbal_lock
     code = jnp.where(sol_result == R.event_occurred, event_code, code)
-    ok = jnp.where(_all_finite(ys), Result.success, Result.nonfinite)
+    ok = jnp.where(all_finite(ys), Result.success, Result.nonfinite)
     return jnp.where(sol_result == R.successful, ok, code).astype(jnp.int32)
 
 
@@ -70,10 +66,10 @@ def _probe(formulation, scene, y_end, t_end, span) -> jax.Array:
         y = jax.tree_util.tree_map(lambda a, f: a + d * f, y_end, f_end)
         f = formulation.vector_field(t_end + d, y, scene)
         f_end = jax.tree_util.tree_map(lambda a, b: jnp.where(i == 0, b, a), f_end, f)
-        return f_end, finite & _all_finite(f)
+        return f_end, finite & all_finite(f)
 
     zeros = jax.tree_util.tree_map(jnp.zeros_like, y_end)
-    _, finite = jax.lax.fori_loop(0, 4, probe, (zeros, _all_finite(y_end)))
+    _, finite = jax.lax.fori_loop(0, 4, probe, (zeros, all_finite(y_end)))
     return finite
 
 
@@ -141,7 +137,7 @@ def finish_sampled(scene, formulation, ts, ys, invalid=None, interpolation=None,
     """
     if invalid is not None:
         ys = jax.tree_util.tree_map(lambda a: jnp.where(invalid, jnp.nan, a), ys)
-    result = jnp.where(_all_finite(ys), Result.success, Result.nonfinite).astype(jnp.int32)
+    result = jnp.where(all_finite(ys), Result.success, Result.nonfinite).astype(jnp.int32)
     t_stop = ts[-1]
     if invalid is not None:
         result = jnp.where(invalid, jnp.int32(Result.invalid_input), result)

@@ -114,7 +114,7 @@ class SavingController(VectorPIDController):
 
     def nonfinite_trials(self, controller_state) -> jax.Array:
         """:meth:`VectorPIDController.nonfinite_trials` of this controller's state."""
-        return super().nonfinite_trials(controller_state[0])
+        return super().nonfinite_trials(self._pair(controller_state)[0])
 
 
 def saved(sol: diffrax.Solution, ts):

@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jrigid._checks import check_number, is_traced
+from jrigid._checks import all_finite, check_number, is_traced
 from jrigid.formulations import AbstractFormulation
 from jrigid.invariants import Invariants
 from jrigid.solve.flat import Flat, vector_lengths
@@ -165,8 +165,7 @@ class ProjectedSolver(WrappedSolver):
         tree_map = jax.tree_util.tree_map
 
         def one(y):
-            finite = jnp.all(jnp.stack([jnp.all(jnp.isfinite(a))
-                                        for a in jax.tree_util.tree_leaves(y)]))
+            finite = all_finite(y)
             safe = tree_map(lambda a, b: jnp.where(finite, a, b), y, y0)
             done = self.formulation.project(safe, args, self.invariants)
             return tree_map(lambda a, b: jnp.where(finite, a, b), done, y)
@@ -293,8 +292,22 @@ class VectorPIDController(diffrax.PIDController):
         non-finite state or error estimate. A solve that ended with ``dt_min_reached``
         and this flag collapsed on non-finite values
         (:attr:`~jrigid.trajectory.Result.nonfinite`), otherwise on a step too small for
-        its error (:attr:`~jrigid.trajectory.Result.step_size_collapse`)."""
-        return controller_state[1]
+        its error (:attr:`~jrigid.trajectory.Result.step_size_collapse`).
+
+        Raises:
+            ValueError: ``controller_state`` is not this controller's (``None``: the solve
+                did not save it).
+        """
+        return self._pair(controller_state)[1]
+
+    @staticmethod
+    def _pair(controller_state):
+        """``controller_state`` checked to be a pair, as this controller's states are."""
+        if not (isinstance(controller_state, tuple) and len(controller_state) == 2):
+            raise ValueError(
+                "nonfinite_trials needs this controller's final state: solve with "
+                f"diffrax.SaveAt(..., controller_state=True), got {type(controller_state)}")
+        return controller_state
 
     def _initial_step(self, terms, t0, y0, args, func, error_order):
         """Hairer's starting step (*Solving ODEs I*, II.4; diffrax's when ``dt0`` is
@@ -342,7 +355,7 @@ class VectorPIDController(diffrax.PIDController):
     def adapt_step_size(self, t0, t1, y0, y1_candidate, args, y_error, error_order,
                         controller_state):
         controller_state, nonfinite = controller_state
-        bad = ~(_finite(y1_candidate) & _finite(y_error))
+        bad = ~(all_finite(y1_candidate) & all_finite(y_error))
         y0, y1 = self._lengths(y0), self._lengths(y1_candidate)
         controller = self
         if self.acceptance != 1:
@@ -362,12 +375,6 @@ class VectorPIDController(diffrax.PIDController):
         # what a collapse is blamed on: the trials since the last accepted step
         nonfinite = (nonfinite & ~keep) | bad
         return keep, t_next0, t_next1, jump, (state, nonfinite), result
-
-
-def _finite(tree) -> jax.Array:
-    """``()`` bool: every entry of every leaf of ``tree`` is finite."""
-    leaves = jax.tree_util.tree_leaves(tree)
-    return jnp.all(jnp.stack([jnp.all(jnp.isfinite(a)) for a in leaves]))
 
 
 #: The PI coefficients of :func:`controller`. On the free rotor, the rotor near its

@@ -34,11 +34,6 @@ class _Dop853Increments(_Dop853Dense):
         return super().point(jnp.ones_like(h), x)
 
 
-def _tensordot(row, k):
-    """``Σᵢ rowᵢ kᵢ`` over the leading axis of ``k`` (the first ``len(row)`` entries)."""
-    return jnp.tensordot(jnp.asarray(row, k.dtype), k[: len(row)], axes=1)
-
-
 class TightDop853(diffrax.AbstractERK):
     """Hairer's DOP853 (the pair of scipy's ``solve_ivp(method="DOP853")``) as a diffrax
     Runge–Kutta solver, with its error estimate times :attr:`factor`.
