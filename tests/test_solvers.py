@@ -258,15 +258,18 @@ def test_tight_dop853_refuses_a_factor_that_is_not_a_positive_number(factor):
 def test_dense_stages_only_where_an_output_time_falls():
     """``at_outputs(ts)``: a step holding an output time in ``(t0, t1]`` has the dense
     output's stages of the eager solver; a step without one leaves them zero (and the
-    interpolation still starts at ``y0``); a whole solve saving at ``ts`` is unchanged."""
+    interpolation still starts at ``y0``); its state carries the index of the first
+    output time after the step; a whole solve saving at ``ts`` is unchanged."""
     term = diffrax.ODETerm(_flat_kepler)
     y0 = jnp.concatenate([Y0["x"], Y0["v"]])
-    eager, lazy = TightDop853(), TightDop853().at_outputs(jnp.array([0.0, 0.5, 1.0]))
+    out_ts = jnp.array([0.0, 0.5, 1.0])
+    eager, lazy = TightDop853(), TightDop853().at_outputs(out_ts)
     for (t0, t1), inside in (((0.0, 0.4), False), ((0.4, 0.5), True), ((0.5, 0.8), False),
-                             ((0.8, 1.2), True)):
+                             ((0.8, 1.2), True), ((-1.0, 0.6), True)):
         state = eager.init(term, t0, t1, y0, None)
         ref = eager.step(term, t0, t1, y0, None, state, False)
-        got = lazy.step(term, t0, t1, y0, None, state, False)
+        got = lazy.step(term, t0, t1, y0, None, lazy.init(term, t0, t1, y0, None), False)
+        assert int(got[3][-1]) == int(np.searchsorted(out_ts, t1, side="right"))
         np.testing.assert_array_equal(got[0], ref[0])
         np.testing.assert_array_equal(got[1], ref[1])
         f_ref, f_got = ref[2]["f"], got[2]["f"]

@@ -298,12 +298,13 @@ class VectorPIDController(diffrax.PIDController):
             ValueError: ``controller_state`` is not this controller's (``None``: the solve
                 did not save it).
         """
-        return self._pair(controller_state)[1]
+        return self._parts(controller_state)[1]
 
     @staticmethod
-    def _pair(controller_state):
-        """``controller_state`` checked to be a pair, as this controller's states are."""
-        if not (isinstance(controller_state, tuple) and len(controller_state) == 2):
+    def _parts(controller_state, size: int = 2):
+        """``controller_state`` checked to be a tuple of ``size``, as this controller's
+        states are (a pair; a :class:`~jrigid.solve.saving.SavingController`'s three)."""
+        if not (isinstance(controller_state, tuple) and len(controller_state) == size):
             raise ValueError(
                 "nonfinite_trials needs this controller's final state: solve with "
                 f"diffrax.SaveAt(..., controller_state=True), got {type(controller_state)}")

@@ -137,7 +137,12 @@ class TightDop853(diffrax.AbstractERK):
             return solver.init(terms, t0, t1, y0, args)
         if self.fused(terms, t0, y0, args):
             return _FUSED.init(terms, t0, t1, y0, args)
-        return super().init(terms, t0, t1, y0, args)
+        state = super().init(terms, t0, t1, y0, args)
+        if self.output_ts is None:
+            return state
+        # the first output time after t0, carried from step to step (diffrax keeps the
+        # solver's state on a rejected step) instead of searched for in every step
+        return state + (jnp.searchsorted(self.output_ts, t0, side="right").astype(jnp.int32),)
 
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
         solver = self.in_precision_of(y0)
@@ -168,9 +173,19 @@ class TightDop853(diffrax.AbstractERK):
     def _holds_output(self, t0, t1) -> jax.Array:
         """Whether the step ``t0 → t1`` holds one of the :attr:`output_ts` in ``(t0, t1]``
         (``()`` bool; only with :attr:`output_ts`)."""
-        ts = self.output_ts
-        i = jnp.searchsorted(ts, t0, side="right")  # the first output time after t0
-        return (i < ts.shape[0]) & (ts[jnp.minimum(i, ts.shape[0] - 1)] <= t1)
+        return self._reaches(jnp.searchsorted(self.output_ts, t0, side="right"), t1)
+
+    def _reaches(self, i, t1) -> jax.Array:
+        """Whether :attr:`output_ts` has an ``i``-th time and it is ``≤ t1``."""
+        n = self.output_ts.shape[0]
+        return (i < n) & (self.output_ts[jnp.minimum(i, n - 1)] <= t1)
+
+    def _outputs_up_to(self, t1, first) -> tuple[jax.Array, jax.Array]:
+        """``(holds, after)``: whether a step ending at ``t1`` holds one of the
+        :attr:`output_ts`, given the index ``first`` of the first one after its start,
+        and the index of the first one after ``t1`` (a loop over the step's outputs)."""
+        after = jax.lax.while_loop(lambda i: self._reaches(i, t1), lambda i: i + 1, first)
+        return after > first, after
 
     def _looped_step(self, terms, t0, t1, y0, args, solver_state, made_jump):
         """The step with every stage in one loop: the first (only on the first step or
@@ -180,7 +195,7 @@ class TightDop853(diffrax.AbstractERK):
         dense output's stages)."""
         tree_map = jax.tree_util.tree_map
         a_rows, c_all, b, e5_w = _stage_coefficients(type(self))
-        first_step, f0 = solver_state
+        first_step, f0, *first_output = solver_state
         evaluate_first = eqxi.unvmap_any(first_step | made_jump)
         control = terms.contr(t0, t1)
         dtype_t = jnp.result_type(t0, t1)
@@ -199,8 +214,11 @@ class TightDop853(diffrax.AbstractERK):
         def plus(weights, fs):
             return tree_map(lambda y, d: y + d.astype(y.dtype), y0, increment(weights, fs))
 
-        last = _ALL if self.output_ts is None else jnp.where(
-            self._holds_output(t0, t1), _ALL, _STAGES)
+        if self.output_ts is None:
+            last, state = _ALL, ()
+        else:
+            holds, after = self._outputs_up_to(t1, first_output[0])
+            last, state = jnp.where(holds, _ALL, _STAGES), (after,)
 
         def body(carry):
             i, fs = carry
@@ -225,7 +243,7 @@ class TightDop853(diffrax.AbstractERK):
         e5, e3 = increment(e5_w, fs), increment(self.error3, fs)
         y_error = tree_map(lambda a: self.factor * a, _dop853_error(e5, e3))
         k = terms.prod(treedef.unflatten(list(fs)), control)  # the increments h fᵢ
-        return (y1, y_error, dict(y0=y0, y1=y1, f=k), (False, f1),
+        return (y1, y_error, dict(y0=y0, y1=y1, f=k), (False, f1, *state),
                 diffrax.RESULTS.successful)
 
 
