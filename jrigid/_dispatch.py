@@ -87,14 +87,18 @@ def configure() -> None:
         sys.meta_path.insert(0, _AfterJaxImport())
 
 
-def one_kernel(fn):
+def one_kernel(fn, reverse: bool = False):
     """``fn`` (arrays in, arrays out) traced inside a ``while`` loop that runs once.
 
     XLA:CPU then compiles it into one kernel, if ``fn`` holds no sort, scatter or custom
     call (equinox's runtime errors are custom calls). Derivatives are those of ``fn``
-    itself (a ``custom_jvp``: forward mode through the loop, reverse mode, which a
-    ``while`` loop does not have, through ``fn``). Under ``vmap`` the loop stays one
-    iteration.
+    itself, which a ``while`` loop does not have in reverse mode: with ``reverse``, a
+    ``custom_vjp`` (``jax.vjp`` of ``fn``: reverse mode only, as for a solve whose
+    adjoint is diffrax's ``RecursiveCheckpointAdjoint``, itself a ``custom_vjp``);
+    otherwise a ``custom_jvp`` (``jax.jvp`` of ``fn``: forward mode, and reverse mode
+    where ``fn`` has it). (A ``custom_jvp`` over a ``custom_vjp`` could not be
+    differentiated in reverse mode under ``vmap``: ``jax.grad`` of a loss summed over
+    ``jax.vmap(simulate)`` failed.) Under ``vmap`` the loop stays one iteration.
     """
     import jax
     import jax.numpy as jnp
@@ -111,6 +115,10 @@ def one_kernel(fn):
         )
         return out
 
+    if reverse:
+        wrapped = jax.custom_vjp(looped)
+        wrapped.defvjp(lambda *args: jax.vjp(fn, *args), lambda pullback, g: pullback(g))
+        return wrapped
     wrapped = jax.custom_jvp(looped)
     wrapped.defjvp(lambda primals, tangents: jax.jvp(fn, primals, tangents))
     return wrapped

@@ -272,7 +272,7 @@ def _solve_body(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoint,
         return traj, cause
 
     if saves_itself:
-        solve = one_kernel(solve)
+        solve = one_kernel(solve, reverse=not isinstance(adjoint, diffrax.ForwardMode))
     traj, cause = solve(scene, state, ts, rtol, atol, dt0)
     # The scene and the output times are the inputs (an invalid member was solved with
     # stand-ins): :func:`_solve` puts them back, so that a compiled program does not copy

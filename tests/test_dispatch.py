@@ -90,6 +90,49 @@ def test_one_kernel_gives_the_functions_values_and_derivatives():
     np.testing.assert_allclose(batched["b"][1], _f(xs[1], y)["b"], rtol=1e-12)
 
 
+def test_one_kernel_in_reverse_mode_differentiates_under_vmap():
+    """``one_kernel(fn, reverse=True)`` (a ``custom_vjp``, for a solve whose adjoint is
+    itself one): values and reverse-mode derivatives of ``fn``, also of a loss summed
+    over ``vmap``; forward mode is refused."""
+    x, y = jnp.array([0.3, -1.2, 2.0]), jnp.array([1.5, -0.5])
+    g = one_kernel(_f, reverse=True)
+    for k in ("a", "b", "n"):
+        np.testing.assert_array_equal(g(x, y)[k], _f(x, y)[k])
+
+    def loss(h):
+        return lambda x, y: jnp.sum(h(x, y)["a"] * h(x, y)["b"])
+
+    want = jax.grad(loss(_f), argnums=(0, 1))(x, y)
+    for got in (jax.grad(loss(g), argnums=(0, 1))(x, y),
+                jax.jit(jax.grad(loss(g), argnums=(0, 1)))(x, y)):
+        for a, b in zip(got, want, strict=True):
+            np.testing.assert_allclose(a, b, rtol=1e-12)
+    xs = jnp.stack([x, 2 * x])
+
+    def summed(h):
+        return lambda xs: jnp.sum(jax.vmap(loss(h), in_axes=(0, None))(xs, y))
+
+    np.testing.assert_allclose(jax.grad(summed(g))(xs), jax.grad(summed(_f))(xs), rtol=1e-12)
+    with pytest.raises(TypeError, match="custom_vjp"):
+        jax.jacfwd(loss(g))(x, y)
+
+
+def test_gradient_of_a_loss_over_vmapped_simulate():
+    """``jax.grad`` of a loss summed over ``jax.vmap(simulate)`` (the default, reverse-mode
+    adjoint) equals each member's own gradient (it raised a forward-mode error)."""
+    scene = Scene(RigidBody(jnp.array([1.0, 2.0, 3.0])))
+    ts = jnp.linspace(0.0, 1.0, 3)
+    spins = jnp.array([[1.0, 0.3, 0.7], [0.5, 1.0, 0.2]])
+
+    def one(w):
+        traj = simulate(scene, initial.from_omega(None, w), ts)
+        return traj.omega[-1, 0] + traj.q[-1, 1]
+
+    got = jax.grad(lambda ws: jnp.sum(jax.vmap(one)(ws)))(spins)
+    np.testing.assert_allclose(got, jnp.stack([jax.grad(one)(w) for w in spins]), rtol=1e-12)
+    assert np.all(np.abs(got) > 1e-3)
+
+
 def test_one_kernel_compiles_into_a_single_kernel():
     text = jax.jit(one_kernel(_f)).lower(jnp.ones(3), jnp.ones(2)).compile().as_text()
     entry = text[text.index("ENTRY"):]
