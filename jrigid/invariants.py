@@ -17,7 +17,15 @@ for a body on a pivot), so that a relative change of ω costs as much as the sam
 rotation angle. For a torque-free body the invariants (energy, ``|L|²``) do not depend
 on the orientation, and only ω moves.
 
-Derivatives (forward and reverse mode) are those of the projected step. Where the
+Derivatives (forward and reverse mode) are those of the projected step, with one
+exception: a top's momentum about its lever (``L·r̂``) is conserved only while the body
+is symmetric about that line (two equal moments, the centre of mass on the third axis),
+so derivatives with respect to what breaks that symmetry (one of the two moments, the
+centre of mass off the axis) must let it change. Its value is restored, but not its
+derivative (its residual enters the correction without one): restored in value and
+derivative, such a derivative came out wrong (3.6× too large, or of the wrong sign, for
+the centre of mass off the axis of a heavy symmetric top), whereas the other invariants
+hold for every value of the parameters. Where the
 invariants become dependent (a spin about a principal axis, a spherical body, a
 symmetric one spinning about an equatorial axis) the normal equations are regularised
 row by row (:data:`RIDGE`) so that rounding is not amplified: without that the
@@ -194,6 +202,9 @@ def _project_top(top: TopConstants, targets: jax.Array, q: jax.Array, omega: jax
     here = top.conserved_at(g_body, omega)
     weight = jnp.where(here.active, 1.0 / here.scales, 0.0).astype(omega.dtype)[:3]
     residual = (here.values[:3] - targets[:3]) * weight
+    # L·r̂ is conserved only while the body is symmetric about its lever: its value is
+    # restored, its derivative is not (see the module docstring)
+    residual = residual.at[2].set(jax.lax.stop_gradient(residual[2]))
     nu2 = jnp.maximum(jnp.sum(omega * omega) + top.pendulum2,
                       jnp.sqrt(jnp.finfo(omega.dtype).tiny))
     d_theta, d_omega = _top_rows(top, g_body, omega)
