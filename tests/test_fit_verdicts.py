@@ -198,6 +198,41 @@ def test_without_sigma_chi2_is_not_a_test_and_covariance_is_scaled():
     np.testing.assert_allclose(fit.laplace(problem, res.params).cov, cov[::-1, ::-1], rtol=1e-8)
 
 
+def test_noiseless_data_without_sigma_is_a_success():
+    """An exact recovery from noiseless data without σ: χ²/dof (the noise estimate) is at
+    rounding level, so the Gauss–Newton step of rounding size measured "8 standard
+    errors" and the fit was called not stationary; a step that changes no parameter by
+    more than STEP_FLOOR is not a reason."""
+    ts = jnp.linspace(0.0, 8.0, 41)
+    truth = {"shape": fit.moment_ratios_raw(TRUE_MOMENTS), "omega0": jnp.array([0.3, 2.0, 0.2])}
+    _, omega = exact.solve(TRUE_MOMENTS, IDENTITY, truth["omega0"], ts)
+    problem = fit.Problem(fit.Exact(_build), fit.Gyroscope(ts, omega))
+    start = {"shape": fit.moment_ratios_raw(jnp.array([1.0, 1.5, 2.0])), "omega0": omega[0]}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", fit.FitWarning)
+        res = fit.fit(problem, start, method="lm")
+    assert res.success and res.causes == () and res.chi2_dof < 1e-18
+    np.testing.assert_allclose(fit.moment_ratios(res.params["shape"]), TRUE_MOMENTS, atol=1e-10)
+    np.testing.assert_allclose(res.params["omega0"], truth["omega0"], atol=1e-9)
+
+
+def test_a_parameter_seen_only_through_rounding_is_undetermined(example):
+    """The overall scale of a torque-free body's moments changes no residual: its column
+    of the Jacobian is rounding (1e-15 of the largest), which scaled to length 1 looked
+    determined (σ = 1e12, the fit called not stationary). It is named, with σ = inf."""
+    problem, data = example
+
+    def build(theta):
+        return Scene(RigidBody(fit.moments(theta["m"]))), initial.from_omega(None, theta["w"])
+
+    problem = fit.Problem(fit.Exact(build), problem.observations)
+    start = {"m": fit.moments_raw(jnp.array([1.0, 1.5, 2.0])), "w": jnp.asarray(data[0])}
+    with pytest.warns(fit.FitWarning, match=r"rank-deficient.*1·m\[2\]"):
+        res = fit.fit(problem, start, method="lm")
+    assert res.causes == ("rank",) and res.dof == data.size - 5
+    assert np.isinf(res.sigma["m"][2]) and np.all(np.isfinite(res.sigma["w"]))
+
+
 def test_rank_deficient_jacobian_flagged_and_named():
     problem, _ = line_problem(sigma=0.1)
     with pytest.warns(fit.FitWarning, match="rank-deficient") as rec:

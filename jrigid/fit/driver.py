@@ -432,7 +432,7 @@ def _judge(result: FitResult, problem, lm_state, *, max_iter, chi2_alpha, edge_t
     """Fill the verdict and the statistics of ``result`` in place."""
     params = result.params
     finite = all(bool(jnp.all(jnp.isfinite(x))) for x in jax.tree_util.tree_leaves(params))
-    lap = step_length = moments = None
+    lap = step_length = step_change = moments = None
     sigma_given = True
     if problem is not None and finite:
         sigma_given = problem.sigma_given
@@ -456,6 +456,8 @@ def _judge(result: FitResult, problem, lm_state, *, max_iter, chi2_alpha, edge_t
             g = np.asarray(jac).T @ np.asarray(r)
             c0 = np.asarray(lap.cov_pinv) / scale
             step_length = float(np.sqrt(max(g @ c0 @ g, 0.0) / scale)) if scale > 0 else 0.0
+            step = np.abs(c0 @ g) / np.maximum(1.0, np.abs(np.asarray(lap.flat)))
+            step_change = float(np.max(step)) if step.size else 0.0
             result.chi2, result.dof = lap.chi2, lap.dof
             result.chi2_dof = lap.chi2 / lap.dof if lap.dof > 0 else None
         result.laplace = lap
@@ -470,6 +472,7 @@ def _judge(result: FitResult, problem, lm_state, *, max_iter, chi2_alpha, edge_t
         max_iter=max_iter,
         laplace=lap,
         step_length=step_length,
+        step_change=step_change,
         sigma_given=sigma_given,
         moments=None if moments is None else np.asarray(moments),
         chi2_alpha=chi2_alpha,

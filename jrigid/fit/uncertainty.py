@@ -13,7 +13,9 @@ and independent of the parameters' units). A direction whose scaled singular val
 below ``rcond`` times the largest (default ``√eps``, 1.5e-8 in float64: determined
 more than ~10⁸ times worse than the best direction, beyond the accuracy of an ODE
 solver's Jacobian) is one the data cannot determine, and so is every parameter whose
-column is zero (one the model ignores). Along such a direction the variance is
+column is below ``rcond`` times the largest column (one the model ignores, or sees only
+through rounding and the solver's error; so parameters should be scaled within a factor
+10⁸ of each other, as those of :mod:`jrigid.fit.params` are). Along such a direction the variance is
 infinite: every parameter it involves gets ``σ = inf`` (``cov`` has ``inf`` on its
 diagonal and ``NaN`` in its row and column), and :func:`laplace` warns with the
 combination in the parameters' names. Quantities the data do determine keep finite
@@ -175,11 +177,14 @@ class Laplace:
         n, p = j.shape
         dtype = jnp.asarray(flat).dtype
         cut = float(np.sqrt(np.finfo(dtype).eps)) if rcond is None else float(rcond)
-        # column scaling: units do not matter; a column that is zero to rounding (a
-        # parameter the model ignores) is scaled as the largest, so it stays zero
+        # column scaling: units do not matter; a column below the cut-off times the
+        # largest (a parameter the model ignores, or one whose effect is rounding and the
+        # solver's error: the overall scale of a torque-free body's moments, 1e-15 of the
+        # largest column, which scaled to length 1 looked determined) is scaled as the
+        # largest, so it stays as small
         norms = np.linalg.norm(j, axis=0)
         top = norms.max() if p else 0.0
-        zero = norms <= np.finfo(dtype).eps * top
+        zero = norms <= cut * top
         d = np.where(zero | (norms == 0), top if top > 0 else 1.0, norms)
         _, s, vt = np.linalg.svd(j / d[None, :], full_matrices=True)
         s = np.concatenate([s, np.zeros(p - s.shape[0])]) if s.shape[0] < p else s

@@ -19,7 +19,11 @@ on what can be known there, and names every cause of failure:
     the Gauss–Newton step from the final parameters is longer than
     :data:`STEP_TOL` standard errors, ``‖U_kᵀ r‖ > STEP_TOL`` (``U_k`` the determined
     left singular vectors of the whitened Jacobian; this is the step's length in the
-    metric of the Laplace covariance): the optimiser stopped short of the minimum.
+    metric of the Laplace covariance), and it changes some flattened parameter ``θᵢ``
+    by more than :data:`STEP_FLOOR` ``· max(1, |θᵢ|)``: the optimiser stopped short of
+    the minimum. (A smaller step is rounding and the solver's error. Without ``σ`` and
+    with noiseless data, χ²/dof, and with it the standard errors, is itself at rounding
+    level: an exact recovery, 2e-13 from the truth, had a step "8 standard errors" long.)
 ``"chi2"``
     the χ² test rejects the model: with ``dof = N − rank`` degrees of freedom, the
     upper tail probability ``P(χ²_dof ≥ χ²) < chi2_alpha``. Under a right model with the
@@ -59,6 +63,7 @@ __all__ = [
     "CAUSES",
     "DEFAULT_CHI2_ALPHA",
     "DEFAULT_EDGE_TOL",
+    "STEP_FLOOR",
     "STEP_TOL",
     "FitError",
     "FitWarning",
@@ -71,6 +76,9 @@ __all__ = [
 DEFAULT_CHI2_ALPHA = 1e-6
 DEFAULT_EDGE_TOL = 1e-5
 STEP_TOL = 0.1
+#: Relative change of a parameter below which a Gauss–Newton step is rounding and the
+#: solver's error, however many standard errors long (see ``"not_stationary"``).
+STEP_FLOOR = 1e-8
 CAUSES = ("nonfinite", "max_iter", "stalled", "not_stationary", "chi2", "edge", "rank")
 
 
@@ -146,6 +154,7 @@ def assess(
     max_iter: int,
     laplace=None,
     step_length: float | None = None,
+    step_change: float | None = None,
     sigma_given: bool = True,
     moments=None,
     chi2_alpha: float = DEFAULT_CHI2_ALPHA,
@@ -162,6 +171,8 @@ def assess(
             objective, or non-finite residuals): then only the optimiser's stop is judged.
         step_length: Gauss–Newton step length in standard errors (``‖U_kᵀ r‖``, scaled
             by ``1/√(χ²/dof)`` when ``σ`` is unknown), or ``None``.
+        step_change: largest change of a flattened parameter in that step, relative to
+            ``max(1, |θᵢ|)``, or ``None`` (not known: only ``step_length`` is judged).
         sigma_given: every observation came with its ``σ``.
         moments: ``(3,)`` principal moments of the fitted body, or ``None``.
         chi2_alpha: tail probability below which the χ² test fails (``0`` disables).
@@ -195,7 +206,9 @@ def assess(
         )
     p_value = None
     if laplace is not None:
-        if step_length is not None and step_length > STEP_TOL and reason != "max_iter":
+        significant = step_change is None or step_change > STEP_FLOOR
+        if (step_length is not None and step_length > STEP_TOL and significant
+                and reason != "max_iter"):
             causes["not_stationary"] = (
                 f"the final parameters are not at a minimum: the Gauss–Newton step from "
                 f"them is {_fmt(step_length)} standard errors long (> {STEP_TOL}); the "
