@@ -295,6 +295,23 @@ def test_nonfinite_torque_reported():
     assert "t=3" in str(info.value)
 
 
+def test_torque_nonfinite_from_the_start_is_reported_as_such():
+    """A NaN from t = 0 made the starting step NaN: every step was rejected until max_steps
+    ran out, and the solve was reported as out of steps. Now the default controller
+    starts from a finite step and ends in a few rejected steps; with a user's diffrax
+    controller (whose own starting step is NaN) the exhausted budget is blamed on NaN."""
+    state = initial.from_omega(Q0, OMEGA0)
+    scene = power_scene(-0.3, 0.0, -1.0)  # NaN everywhere from t = 0
+    with pytest.raises(SimulationError, match="non-finite") as info:
+        simulate(scene, state, TS)
+    assert "t=0 " in str(info.value)
+    traj = simulate(scene, state, TS, throw=False)
+    assert int(traj.result) == Result.nonfinite and int(traj.stats["num_steps"]) < 100
+    traj = simulate(scene, state, TS, throw=False, max_steps=50,
+                    stepsize_controller=diffrax.PIDController(rtol=1e-8, atol=1e-10))
+    assert int(traj.result) == Result.nonfinite
+
+
 def test_step_size_collapse_reported():
     """N = k |ω|² ω blows up at t* = I / (2 k |ω0|²) = 2: a singular solution."""
     state = initial.from_omega(None, jnp.array([1.0, 0.0, 0.0]))

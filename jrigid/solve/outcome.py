@@ -25,8 +25,8 @@ def classify(sol_result, formulation, scene, y_end, t_end, ys, span, user_event=
              nonfinite_trials=None):
     """Map diffrax's result to a :class:`~jrigid.trajectory.Result` code (``()`` int32).
 
-    A collapsed step size is blamed on non-finite values if the last accepted state is
-    not finite, or if ``nonfinite_trials`` (``()`` bool: jrigid's controller records
+    A collapsed step size, or an exhausted step budget, is blamed on non-finite values
+    if the last accepted state is not finite, or if ``nonfinite_trials`` (``()`` bool: jrigid's controller records
     whether the trial steps since the last accepted one had non-finite values,
     :meth:`~jrigid.solve.stepping.VectorPIDController.nonfinite_trials`) says so. Without
     that record (a user's controller, or members of one shared solve), the vector field
@@ -42,7 +42,10 @@ def classify(sol_result, formulation, scene, y_end, t_end, ys, span, user_event=
         finite = _probe(formulation, scene, y_end, t_end, span)
     else:
         finite = all_finite(y_end) & ~nonfinite_trials
-    code = jnp.where(sol_result == R.max_steps_reached, Result.max_steps, Result.solver_failure)
+    # steps exhausted on non-finite values (with a starting step that was itself NaN,
+    # every step is rejected without reaching dtmin) are non-finite values
+    code = jnp.where(sol_result == R.max_steps_reached,
+                     jnp.where(finite, Result.max_steps, Result.nonfinite), Result.solver_failure)
     code = jnp.where(
         sol_result == R.dt_min_reached,
         jnp.where(finite, Result.step_size_collapse, Result.nonfinite),

@@ -350,7 +350,13 @@ class VectorPIDController(diffrax.PIDController):
         order = self._get_error_order(error_order)
         h1 = jnp.where(max_d <= 1e-15, jnp.maximum(1e-6, h0 * 1e-3),
                        (0.01 / jnp.where(max_d <= 1e-15, 1.0, max_d)) ** (1 / order))
-        return jax.lax.stop_gradient(in_unit(jnp.minimum(100 * h0, h1)))
+        h = jnp.minimum(100 * h0, h1)
+        # A field that is not finite at the start (a NaN torque) makes the rule NaN, and a
+        # NaN step is rejected forever without reaching dtmin (the solve then ran out of
+        # max_steps): start from Hairer's fallback instead, so that the rejected steps
+        # shrink to dtmin and the solve ends as non-finite.
+        h = jnp.where(jnp.isfinite(h) & (h > 0), h, 1e-6)
+        return jax.lax.stop_gradient(in_unit(h))
 
     @traced_once
     def adapt_step_size(self, t0, t1, y0, y1_candidate, args, y_error, error_order,
