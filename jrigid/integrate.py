@@ -243,6 +243,13 @@ def _filter_solve(*args):
     return _solve_body(*args)
 
 
+def _refuse(what: str, **options) -> None:
+    """``ValueError`` naming the first of ``options`` that is given (not ``None``)."""
+    for name, value in options.items():
+        if value is not None:
+            raise ValueError(f"{what}: it takes no {name}")
+
+
 def _saves_itself(formulation, solver, adjoint, dense, saveat, stepsize_controller,
                   event) -> bool:
     """Whether a solve saves at ``ts`` through its controller (:mod:`jrigid.solve.saving`)
@@ -421,8 +428,12 @@ def simulate(
             ``diffrax.Heun``, ...) need ``stepsize_controller=diffrax.ConstantStepSize()``
             and ``dt0``. Or ``"exact"``: the closed-form motion (:mod:`jrigid.closed_form`)
             for torque-free scenes; then ``rtol``, ``atol``, ``max_steps``, ``dt0``,
-            ``adjoint`` and ``project`` are ignored, ``stats`` are zero, and ``dense=True``
-            keeps the closed form for :meth:`Trajectory.at`. Or a
+            ``adjoint`` and ``project`` are ignored, ``saveat``, ``stepsize_controller``
+            and ``event`` are refused, ``stats`` are zero, and ``dense=True`` keeps the
+            closed form for :meth:`Trajectory.at`. (For a heavy symmetric top the closed
+            form holds only for a body symmetric about its lever: its derivatives are
+            those along symmetric bodies, such as ``I₁ + I₂`` together, not ``I₁`` alone
+            or the centre of mass off the axis.) Or a
             :class:`jrigid.splitting.Splitting` (``"splitting"``: its default method with
             step ``dt0``): fixed-step exact-flow splitting for a body on a pivot (or in
             free rotation) under a torque of the orientation and time only; ``rtol``,
@@ -494,11 +505,8 @@ def simulate(
                              "solver=jrigid.splitting.Splitting(method, dt=... or steps=...)")
         solver = splitting.Splitting(dt=dt0)
     if isinstance(solver, splitting.Splitting):
-        unsupported = dict(dense=dense or None, saveat=saveat, event=event,
-                           stepsize_controller=stepsize_controller)
-        for name, value in unsupported.items():
-            if value is not None:
-                raise ValueError(f"the splitting solver has fixed steps and no {name}")
+        _refuse("the splitting solver has fixed steps", dense=dense or None, saveat=saveat,
+                event=event, stepsize_controller=stepsize_controller)
         state, ts, rtol, atol = prepare(scene, initial_state, ts, None, None, dtype)
         splitting.check_scene(scene)
         check_scene(formulation, scene)
@@ -512,6 +520,8 @@ def simulate(
             raise ValueError(
                 f"solver must be a diffrax solver, 'exact' or 'splitting', got {solver!r}"
             )
+        _refuse("solver='exact' follows the closed form without steps", saveat=saveat,
+                event=event, stepsize_controller=stepsize_controller)
         state, ts, rtol, atol = prepare(scene, initial_state, ts, None, None, dtype)
         closed_form.check_scene(scene)
         check_scene(formulation, scene)

@@ -147,6 +147,20 @@ def test_heavy_symmetric_top_in_closed_form():
     assert np.abs(e - e[0]).max() < 1e-12
 
 
+@pytest.mark.parametrize("option", ["saveat", "event", "stepsize_controller"])
+def test_options_without_meaning_for_the_closed_form_refused(option):
+    """An event, a SaveAt and a step-size controller were silently ignored (an event
+    never fired, the solve reported success)."""
+    import diffrax
+
+    value = {"saveat": diffrax.SaveAt(steps=True),
+             "event": diffrax.Event(lambda t, y, args, **kw: t - 3.0),
+             "stepsize_controller": diffrax.PIDController(rtol=1e-6, atol=1e-8)}[option]
+    with pytest.raises(ValueError, match=f"closed form.*no {option}"):
+        simulate(Scene(RigidBody(MOMENTS)), initial.from_omega(Q0, OMEGA0), TS, solver="exact",
+                 **{option: value})
+
+
 def test_unknown_solver_string():
     with pytest.raises(ValueError, match="'exact'"):
         simulate(Scene(RigidBody(MOMENTS)), initial.from_omega(Q0, OMEGA0), TS, solver="rk4")
