@@ -154,3 +154,12 @@ def test_failed_groups_follow_chunks_groups_and_order():
     order = np.arange(10)[::-1]
     assert ensemble.many.failed_groups(codes, order, 4, 4).tolist() == [9, 8, 7, 6]
     assert ensemble.many.failed_groups(np.zeros(10, np.int32), order, 4, 4).size == 0
+
+
+@pytest.mark.parametrize("ts", [TS[::-1], np.array([0.0, 1.0, 1.0, 2.0])])
+def test_output_times_not_increasing_are_refused_up_front(ts):
+    """Every member shares ``ts``: decreasing or repeated times are the sweep's error, not
+    every member's (they all came back invalid, with NaN outputs and a warning to run
+    one member alone)."""
+    with pytest.raises(ValueError, match="strictly increasing"):
+        ensemble.simulate_many(SCENE, states_of(np.eye(3)), ts, progress=False)

@@ -168,6 +168,8 @@ def simulate_many(
     ts = np.asarray(ts, dtype=jax.dtypes.canonicalize_dtype(np.float64))
     if ts.ndim != 1 or ts.shape[0] < 2 or not np.all(np.isfinite(ts)):
         raise ValueError(f"ts must be a finite 1-D array of at least 2 times, got {ts!r}")
+    if np.any(np.diff(ts) <= 0):  # shared by every member: not one member's problem
+        raise ValueError(f"ts must be strictly increasing, got {ts!r}")
     kwargs = {"throw": False, **SWEEP_DEFAULTS, **simulate_kwargs}
     lockstep = _use_lockstep(shared_step, kwargs)
     # Arrays common to all members are traced (changing them does not recompile).

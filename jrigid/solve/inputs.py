@@ -141,11 +141,13 @@ def input_checks(formulation, scene, state: State, ts, rtol, atol) -> list[tuple
     finite = lambda a: jnp.all(jnp.isfinite(a))  # noqa: E731
     n = quat.norm(state.q)  # scale-safe: |q| = 1e-300 or 1e300 is a valid orientation
     out = [
-        (~jnp.isfinite(rtol) | (rtol <= 0), "rtol must be finite and > 0"),
+        (~jnp.isfinite(rtol) | (rtol <= 0) | (rtol >= 1),
+         "rtol must be finite, > 0 and < 1 (a relative error of 1 or more controls nothing)"),
         (
             rtol < 10 * eps,
             f"rtol is below 10 machine epsilons ({10 * float(eps):.3g}) of {name}: the error "
-            "control cannot meet it; raise rtol (or enable float64)",
+            "control cannot meet it; raise rtol"
+            + (" (or enable float64)" if jnp.finfo(rtol.dtype).bits < 64 else ""),
         ),
         (~jnp.isfinite(atol) | (atol < 0), "atol must be finite and >= 0"),
         (~finite(ts), "ts has non-finite entries"),
