@@ -49,7 +49,10 @@ Differentiation: reverse mode (``jax.grad``) through diffrax's
 are being forward-differentiated (``jax.jacfwd(f)``, ``jax.jit(jax.jacfwd(f))``). It
 cannot see a forward derivative taken *outside* a ``jit`` it runs in,
 ``jax.jacfwd(jax.jit(f))``: JAX then fails with "can't apply forward-mode autodiff (jvp)
-to a custom_vjp function"; pass ``adjoint=diffrax.ForwardMode()`` there.
+to a custom_vjp function"; pass ``adjoint=diffrax.ForwardMode()`` there. Second
+derivatives: ``jax.jacfwd(jax.jacfwd(f))`` (``jax.hessian`` takes reverse mode inside
+forward mode, which neither adjoint supports). Reverse mode under ``vmap`` works too
+(``jax.grad`` of a loss summed over ``jax.vmap(simulate)``).
 """
 
 from __future__ import annotations
@@ -94,7 +97,9 @@ __all__ = ["simulate"]
 _FORWARD_MODE_HINT = (
     "forward-mode differentiation (jax.jvp/jacfwd) of jrigid.simulate needs "
     "adjoint=diffrax.ForwardMode(); the default RecursiveCheckpointAdjoint is for "
-    "reverse mode (jax.grad)"
+    "reverse mode (jax.grad). Second derivatives: jax.jacfwd(jax.jacfwd(f)) (forward "
+    "over forward; jax.hessian puts reverse mode inside forward mode, which neither "
+    "adjoint supports)"
 )
 
 
@@ -458,7 +463,8 @@ def simulate(
             forward-differentiated (``jax.jacfwd``). For ``jax.jacfwd(jax.jit(f))``, where
             the forward derivative is taken outside the ``jit``, pass
             ``adjoint=diffrax.ForwardMode()`` yourself (JAX otherwise fails with "can't
-            apply forward-mode autodiff (jvp) to a custom_vjp function").
+            apply forward-mode autodiff (jvp) to a custom_vjp function"). Second
+            derivatives: ``jax.jacfwd(jax.jacfwd(f))``, not ``jax.hessian``.
         project: ``True`` (default): after every step (and at every output) put a
             quaternion formulation's state back on ``|q| = 1`` (``q·q̇ = 0``) and restore
             the scene's invariants (:mod:`jrigid.invariants`); ``"manifold"``: the

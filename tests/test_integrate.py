@@ -169,6 +169,29 @@ def test_checkpointed_reverse_mode_equals_forward_mode():
     np.testing.assert_allclose(reverse, forward, rtol=1e-8, atol=1e-9)
 
 
+def test_second_derivatives_forward_over_forward():
+    """``jax.jacfwd(jax.jacfwd(f))`` gives the Hessian (symmetric, and the central
+    differences of the reverse-mode gradient); ``jax.hessian`` (reverse inside forward)
+    is refused with a message that names the way that works."""
+
+    def final(moments):
+        traj = simulate(Scene(RigidBody(moments)), initial.from_omega(None, OMEGA0),
+                        jnp.array([0.0, 2.0]), rtol=1e-10, atol=1e-12)
+        return traj.omega[-1, 0]
+
+    moments = jnp.array([1.5, 2.0, 3.0])
+    hessian = jax.jacfwd(jax.jacfwd(final))(moments)
+    np.testing.assert_allclose(hessian, hessian.T, atol=1e-12)
+    h = 1e-4
+    grad = jax.jit(jax.grad(final))
+    fd = np.stack([(grad(moments.at[i].add(h)) - grad(moments.at[i].add(-h))) / (2 * h)
+                   for i in range(3)])
+    np.testing.assert_allclose(hessian, fd, rtol=1e-6, atol=1e-7)
+    assert np.abs(hessian).max() > 0.1
+    with pytest.raises(TypeError, match=r"jax.jacfwd\(jax.jacfwd\(f\)\)"):
+        jax.hessian(final)(moments)
+
+
 def test_tolerance_change_does_not_recompile(caplog):
     state = initial.from_omega(Q0, OMEGA0)
     simulate(free_scene(), state, TS, rtol=1e-9)
