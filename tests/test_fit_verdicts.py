@@ -233,6 +233,21 @@ def test_a_parameter_seen_only_through_rounding_is_undetermined(example):
     assert np.isinf(res.sigma["m"][2]) and np.all(np.isfinite(res.sigma["w"]))
 
 
+def test_sigma_far_too_large_is_warned_about(example):
+    """σ = 2 for data whose noise is 0.02: the fit is right but χ²/dof ≈ 1e-4, and the
+    error bars are 100× too large; the fit succeeds and says so, with a warning."""
+    problem, data = example
+    problem = fit.Problem(fit.Exact(_build), fit.Gyroscope(problem.observations[0].ts, data,
+                                                           sigma=2.0))
+    start = {"shape": fit.moment_ratios_raw(jnp.array([1.0, 1.5, 2.0])), "omega0": data[0]}
+    with pytest.warns(fit.FitWarning, match="succeeded, but χ²/dof = .* far below 1"):
+        res = fit.fit(problem, start, method="lm")
+    assert res.success and res.chi2_dof < 1e-3 and "σ is too large" in res.message
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", fit.FitWarning)
+        fit.fit(problem, start, method="lm", on_bad_fit="ignore")
+
+
 def test_rank_deficient_jacobian_flagged_and_named():
     problem, _ = line_problem(sigma=0.1)
     with pytest.warns(fit.FitWarning, match="rank-deficient") as rec:
@@ -278,7 +293,11 @@ def test_laplace_raw_quaternion_norm_is_a_gauge_without_warning():
         q = jnp.broadcast_to(fit.unit_quaternion(theta["q"]), (t.shape[0], 4))
         return fit.Prediction(q, jnp.zeros((t.shape[0], 3)), IDENTITY)
 
-    obs = fit.Orientations(ts, np.tile(np.asarray(q_true), (5, 1)), sigma=0.01)
+    # readings with their noise (exact ones would have χ² far below dof: a warning)
+    noisy = np.tile(np.asarray(q_true), (5, 1))
+    noisy = noisy + 0.01 * np.random.default_rng(2).standard_normal(noisy.shape)
+    obs = fit.Orientations(ts, noisy / np.linalg.norm(noisy, axis=1, keepdims=True),
+                           sigma=0.01)
     with warnings.catch_warnings():
         warnings.simplefilter("error", fit.FitWarning)
         lap = fit.laplace(fit.Problem(model, obs), {"q": 2.0 * q_true})

@@ -259,7 +259,9 @@ def fit(
         FitError: ``on_bad_fit="raise"`` and the fit failed.
 
     Warns:
-        FitWarning: ``on_bad_fit="warn"`` and the fit failed; the message names the causes.
+        FitWarning: ``on_bad_fit="warn"`` and the fit failed (the message names the
+            causes); also, unless ``on_bad_fit="ignore"``, a successful fit whose χ² is
+            far below its degrees of freedom (``σ`` too large: the error bars too).
     """
     f = _as_loss(problem)
     if not isinstance(max_iter, int) or isinstance(max_iter, bool) or max_iter < 1:
@@ -337,14 +339,18 @@ def fit(
         reason=reason,
         history=history,
     )
-    _judge(result, problem if is_problem else None, state if marquardt else None,
-           max_iter=max_iter, chi2_alpha=chi2_alpha, edge_tol=edge_tol, rcond=rcond,
-           method="lm" if marquardt else "lbfgs" if linesearch else method)  # fmt: skip
+    advisory = _judge(
+        result, problem if is_problem else None, state if marquardt else None,
+        max_iter=max_iter, chi2_alpha=chi2_alpha, edge_tol=edge_tol, rcond=rcond,
+        method="lm" if marquardt else "lbfgs" if linesearch else method,
+    )
     if not result.success:
         if on_bad_fit == "raise":
             raise FitError(result.message, result)
         if on_bad_fit == "warn":
             warnings.warn(result.message, FitWarning, stacklevel=2)
+    elif advisory is not None and on_bad_fit != "ignore":
+        warnings.warn(f"fit succeeded, but {advisory}", FitWarning, stacklevel=2)
     return result
 
 
@@ -429,7 +435,8 @@ def _minimise(step, f, optimizer, params, state, history, bar, *, marquardt, lin
 
 def _judge(result: FitResult, problem, lm_state, *, max_iter, chi2_alpha, edge_tol, rcond,
            method):  # fmt: skip
-    """Fill the verdict and the statistics of ``result`` in place."""
+    """Fill the verdict and the statistics of ``result`` in place; return the verdict's
+    advisory (:attr:`~jrigid.fit.verdict.Verdict.advisory`)."""
     params = result.params
     finite = all(bool(jnp.all(jnp.isfinite(x))) for x in jax.tree_util.tree_leaves(params))
     lap = step_length = step_change = moments = None
@@ -483,3 +490,4 @@ def _judge(result: FitResult, problem, lm_state, *, max_iter, chi2_alpha, edge_t
     result.causes = verdict.causes
     result.message = verdict.message
     result.p_value = verdict.p_value
+    return verdict.advisory

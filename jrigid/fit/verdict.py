@@ -31,7 +31,10 @@ on what can be known there, and names every cause of failure:
     ``1e-6`` is the tail beyond about 4.9 standard deviations. A wrong local optimum,
     a wrong model and a ``σ`` that is too small all land here. Tested only when every
     observation was given its ``σ`` (otherwise χ² measures the unknown noise level and
-    the covariance is scaled by ``χ²/dof`` instead) and ``dof > 0``.
+    the covariance is scaled by ``χ²/dof`` instead) and ``dof > 0``. A χ² far *below*
+    ``dof`` (lower tail probability below ``chi2_alpha``: ``σ`` larger than the scatter
+    of the residuals, and the error bars with it) does not fail the fit but is named in
+    the message and warned about (:class:`FitWarning`).
 ``"edge"``
     the body approaches the edge of the physical region: its smallest triangle gap
     ``min(Ia + Ib − Ic) / (I1 + I2 + I3) < edge_tol`` (default ``1e-5``, ten times the
@@ -57,7 +60,7 @@ from typing import Any, NamedTuple
 
 import jax.numpy as jnp
 import numpy as np
-from jax.scipy.special import gammaincc
+from jax.scipy.special import gammainc, gammaincc
 
 __all__ = [
     "CAUSES",
@@ -106,12 +109,16 @@ class Verdict(NamedTuple):
         causes: the failed checks, in the order of :data:`CAUSES`.
         message: the causes explained (first), then the fit's statistics.
         p_value: χ² upper tail probability, or ``None`` when not tested.
+        advisory: a warning that does not fail the fit, or ``None``: χ² far *below* its
+            degrees of freedom (lower tail probability below ``chi2_alpha``), i.e. ``σ``
+            larger than the residuals' scatter, and the error bars with it.
     """
 
     success: bool
     causes: tuple[str, ...]
     message: str
     p_value: float | None
+    advisory: str | None = None
 
 
 def chi2_tail(chi2: float, dof: int) -> float:
@@ -184,6 +191,7 @@ def assess(
     """
     causes: dict[str, str] = {}
     notes: list[str] = []
+    advisory = None
     if reason == "nonfinite":
         causes["nonfinite"] = f"the loss or its gradient became NaN or inf after {n_iter} steps"
     elif reason == "max_iter":
@@ -223,6 +231,15 @@ def assess(
         if dof > 0 and sigma_given:
             p_value = chi2_tail(chi2, dof)
             stats += f", tail probability {p_value:.3g})"
+            p_low = float(gammainc(jnp.asarray(dof / 2.0), jnp.asarray(chi2 / 2.0)))
+            if chi2_alpha > 0 and p_low < chi2_alpha:
+                advisory = (
+                    f"χ²/dof = {_fmt(chi2 / dof)} is far below 1 (lower tail probability "
+                    f"{p_low:.3g} < chi2_alpha = {chi2_alpha:g}): the residuals scatter much "
+                    "less than the σ given, so σ is too large (or the data are not "
+                    "independent), and so are the parameters' error bars, which scale "
+                    "with it"
+                )
             if chi2_alpha > 0 and p_value < chi2_alpha:
                 causes["chi2"] = (
                     f"χ²/dof = {_fmt(chi2 / dof)} is far above 1 (tail probability "
@@ -261,4 +278,6 @@ def assess(
         head = "fit succeeded"
     tail = "; ".join([f"stopped by {reason!r} after {n_iter} steps", *notes])
     message = f"{head}. {tail[0].upper()}{tail[1:]}."
-    return Verdict(not ordered, ordered, message, p_value)
+    if advisory is not None:
+        message += f" Note: {advisory}."
+    return Verdict(not ordered, ordered, message, p_value, advisory)
