@@ -139,6 +139,14 @@ class RigidBody(eqx.Module):
         (moments ascending). The simulation then runs in the principal frame; ``frame``
         keeps the principal → given-frame rotation.
 
+        Derivatives with respect to ``tensor`` are exact for distinct moments. At two
+        equal moments (a symmetric body) the principal frame is not a differentiable
+        function of the tensor: a change that splits the pair turns the frame within
+        their plane by a finite angle. Its derivative there is taken as zero, so
+        derivatives of the motion along such a change (an off-diagonal entry of
+        ``diag(1, 1, 1.6)``) come out zero, not the motion's: differentiate at a
+        slightly asymmetric tensor, or with respect to ``RigidBody(moments, frame=...)``.
+
         Args:
             tensor: ``(3, 3)`` symmetric inertia tensor about the centre of mass, in some
                 body-fixed reference frame.

@@ -556,3 +556,8 @@ def test_float32_core(float32):
     assert_same_rotation(out["slerp"], np.asarray(slerp_ref), atol=2e-6)
     # Tiny angles in float32 stay accurate (Taylor branch).
     np.testing.assert_allclose(out["tiny"], tiny, rtol=1e-6)
+
+
+def test_xyzw_shape_error_names_the_scalar_last_order():
+    with pytest.raises(ValueError, match=r"q_xyzw must have shape .*\(x, y, z, w\)"):
+        jq.from_xyzw(jnp.ones(3))

@@ -23,9 +23,10 @@ def as_float_all(*xs: ArrayLike) -> tuple[jax.Array, ...]:
     return tuple(a.astype(dtype) for a in arrays)
 
 
-def quaternion_arg(q: ArrayLike, name: str = "q") -> jax.Array:
-    """``q`` as a float array, after checking its trailing shape is ``(4,)`` (static)."""
-    return check_shape(as_float(q, weak=True), name, (4,), why=", a quaternion (w, x, y, z)")
+def quaternion_arg(q: ArrayLike, name: str = "q", order: str = "(w, x, y, z)") -> jax.Array:
+    """``q`` as a float array, after checking its trailing shape is ``(4,)`` (static);
+    ``order`` names its components in the message."""
+    return check_shape(as_float(q, weak=True), name, (4,), why=f", a quaternion {order}")
 
 
 def vector_arg(v: ArrayLike, name: str) -> jax.Array:

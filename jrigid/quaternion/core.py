@@ -406,7 +406,7 @@ def from_xyzw(q_xyzw: ArrayLike) -> jax.Array:
     Returns:
         ``(..., 4)``.
     """
-    q = quaternion_arg(q_xyzw, "q_xyzw")
+    q = quaternion_arg(q_xyzw, "q_xyzw", order="(x, y, z, w)")
     return jnp.concatenate([q[..., 3:], q[..., :3]], axis=-1)
 
 
