@@ -26,8 +26,9 @@ def classify(sol_result, formulation, scene, y_end, t_end, ys, span, user_event=
     """Map diffrax's result to a :class:`~jrigid.trajectory.Result` code (``()`` int32).
 
     A collapsed step size, or an exhausted step budget, is blamed on non-finite values
-    if the last accepted state is not finite, or if ``nonfinite_trials`` (``()`` bool: jrigid's controller records
-    whether the trial steps since the last accepted one had non-finite values,
+    if the last accepted state is not finite, or if ``nonfinite_trials`` (``()`` bool:
+    jrigid's controller records whether the trial steps since the last accepted one had
+    non-finite values,
     :meth:`~jrigid.solve.stepping.VectorPIDController.nonfinite_trials`) says so. Without
     that record (a user's controller, or members of one shared solve), the vector field
     is probed at the last accepted state and a little beyond it (rejected trial steps
