@@ -262,10 +262,22 @@ class Trajectory(eqx.Module):
         """The trajectory at new times ``t (K,)`` from the dense interpolation.
 
         Needs ``simulate(..., dense=True)``. The solver statistics are carried over.
+        For a batch of trajectories (``jax.vmap(simulate)``) call it under ``jax.vmap``
+        too.
+
+        Raises:
+            ValueError: no dense output, ``t`` not a scalar or ``(K,)``, or a batched
+                trajectory.
         """
         if self.interpolation is None:
             raise ValueError("no dense output: call simulate(..., dense=True)")
-        return _at(self, jnp.atleast_1d(jnp.asarray(t, dtype=self.ts.dtype)))
+        t = jnp.atleast_1d(jnp.asarray(t, dtype=self.ts.dtype))
+        if t.ndim != 1:
+            raise ValueError(f"t must be a scalar or a (K,) array of times, got shape {t.shape}")
+        if self.ts.ndim != 1:
+            raise ValueError(f"this Trajectory is a batch (ts of shape {self.ts.shape}): "
+                             "evaluate each member, e.g. jax.vmap(lambda tr: tr.at(t))(traj)")
+        return _at(self, t)
 
 
 @eqx.filter_jit

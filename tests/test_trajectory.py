@@ -130,6 +130,14 @@ def test_dense_output():
     same_rotation(at.q, q_ref[1:], 1e-8)
     with pytest.raises(ValueError, match="dense"):
         simulate(free_scene(), state, TS).at(t_mid)
+    with pytest.raises(ValueError, match=r"scalar or a \(K,\) array"):
+        traj.at(np.ones((2, 2)))
+    batch = jax.vmap(lambda w: simulate(free_scene(), initial.from_omega(Q0, w), TS,
+                                        dense=True))(jnp.stack([OMEGA0, 2 * OMEGA0]))
+    with pytest.raises(ValueError, match=r"batch.*jax.vmap"):
+        batch.at(t_mid)
+    each = jax.vmap(lambda tr: tr.at(t_mid).omega)(batch)
+    np.testing.assert_allclose(each[0], at.omega, atol=1e-8)
 
 
 # --------------------------------------------------------------------------- result codes
