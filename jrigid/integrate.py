@@ -176,7 +176,7 @@ def _solve(scene, state, ts, rtol, atol, *options):
     if compiled is not None:
         try:
             traj, cause = compiled.fn(scene, state, ts, rtol, atol)
-            messages = _Messages(compiled.messages, (scene, state))
+            messages = _Messages(compiled.messages, (scene, state, rtol))
         except TypeError:
             if all_arrays(scene, state, ts, rtol, atol):
                 raise
@@ -186,17 +186,24 @@ def _solve(scene, state, ts, rtol, atol, *options):
     return trajectory.replace(traj, scene=scene, ts=ts), cause, messages
 
 
+def _message_key(scene, state, rtol):
+    """What a solve's check messages depend on: the inputs' tree structure and the float
+    type (its machine epsilon and name are in them; a float32 solve's messages had been
+    read for a float64 one of the same structure)."""
+    return jax.tree_util.tree_structure((scene, state)), jnp.dtype(rtol.dtype).name
+
+
 class _Messages(collections.abc.Sequence):
-    """The check messages of a solve, looked up (by the inputs' tree structure) only when
-    read: a plain call reads them only when an input is invalid, and the lookup flattens
-    the scene (about 8 µs)."""
+    """The check messages of a solve, looked up (by :func:`_message_key`) only when read:
+    a plain call reads them only when an input is invalid, and the lookup flattens the
+    scene (about 8 µs)."""
 
     def __init__(self, table, inputs):
         self._table, self._inputs, self._messages = table, inputs, None
 
     def _get(self):
         if self._messages is None:
-            self._messages = self._table[jax.tree_util.tree_structure(self._inputs)]
+            self._messages = self._table[_message_key(*self._inputs)]
         return self._messages
 
     def __getitem__(self, index):
@@ -215,7 +222,7 @@ class _Compiled:
 
         def fn(scene, state, ts, rtol, atol):
             traj, cause, messages = _solve_body(scene, state, ts, rtol, atol, *options)
-            self.messages[jax.tree_util.tree_structure((scene, state))] = messages
+            self.messages[_message_key(scene, state, rtol)] = messages
             return traj, cause
 
         self.fn = jax.jit(fn)
@@ -319,9 +326,10 @@ def _solve_arrays(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoin
     # A solve saving by itself runs in unit time (jrigid.solve.run): its times are solve_ts.
     solve_ts = unit_times(ts) if saves_itself else ts
     if not (user_saveat or dense or event is not None or formulation.event() is not None):
-        # its dense output only saves at ts (and nowhere for the ends only: ts[:1] = t0
-        # is inside no step)
-        solver = interpolating_at(solver, solve_ts[:1] if ends_only else solve_ts)
+        # its dense output only saves at ts (and nowhere for the ends only: no output
+        # time, so that a step neither computes the dense output's stages nor looks for
+        # an output time)
+        solver = interpolating_at(solver, solve_ts[:0] if ends_only else solve_ts)
     manifold, restore = project
     if manifold and formulation.carries_quaternion:
         invariants = Invariants.of(scene, state.q, state.omega) if restore else None

@@ -292,6 +292,14 @@ def test_dense_stages_only_where_an_output_time_falls():
                                                                                 atol=1e-9))
             ys.append(sol.ys)
         np.testing.assert_allclose(ys[1], ys[0], rtol=0, atol=0 if fuse_below == 0 else 1e-13)
+    # no output time (a solve saving its ends only): no step has the dense stages
+    none = TightDop853().at_outputs(jnp.zeros(0))
+    state = none.init(term, 0.0, 0.4, y0, None)
+    assert len(state) == 2
+    got = none.step(term, 0.0, 0.4, y0, None, state, False)
+    ref = eager.step(term, 0.0, 0.4, y0, None, eager.init(term, 0.0, 0.4, y0, None), False)
+    np.testing.assert_array_equal(got[0], ref[0])
+    assert np.all(got[2]["f"][13:] == 0) and len(got[3]) == 2
     for wrong in (jnp.array(1.0), jnp.ones((2, 3))):
         with pytest.raises(ValueError, match="output times must have shape"):
             TightDop853().at_outputs(wrong)

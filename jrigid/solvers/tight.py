@@ -104,7 +104,8 @@ class TightDop853(diffrax.AbstractERK):
         For a solve whose interpolation is used only to save at ``ts`` (diffrax's
         ``SaveAt(ts=ts)``, no dense output, no event): a step without an output time
         then evaluates the vector field 12 times instead of 15. Elsewhere its
-        interpolation is not valid.
+        interpolation is not valid. ``ts`` may be empty (``(0,)``): a solve that saves
+        only the ends of its steps, no step computes them.
 
         Raises:
             ValueError: ``ts`` is not one-dimensional.
@@ -138,7 +139,7 @@ class TightDop853(diffrax.AbstractERK):
         if self.fused(terms, t0, y0, args):
             return _FUSED.init(terms, t0, t1, y0, args)
         state = super().init(terms, t0, t1, y0, args)
-        if self.output_ts is None:
+        if self.output_ts is None or not self.output_ts.shape[0]:
             return state
         # the first output time after t0, carried from step to step (diffrax keeps the
         # solver's state on a rejected step) instead of searched for in every step
@@ -165,7 +166,7 @@ class TightDop853(diffrax.AbstractERK):
 
             if self.output_ts is None:
                 k = dense_stages(k)
-            else:
+            elif self.output_ts.shape[0]:
                 k = jax.lax.cond(self._holds_output(t0, t1), dense_stages, lambda k: k, k)
             return y1, y_error, dict(y0=y0, y1=y1, f=k), solver_state, result
         return self._looped_step(terms, t0, t1, y0, args, solver_state, made_jump)
@@ -173,6 +174,8 @@ class TightDop853(diffrax.AbstractERK):
     def _holds_output(self, t0, t1) -> jax.Array:
         """Whether the step ``t0 → t1`` holds one of the :attr:`output_ts` in ``(t0, t1]``
         (``()`` bool; only with :attr:`output_ts`)."""
+        if not self.output_ts.shape[0]:
+            return jnp.array(False)
         return self._reaches(jnp.searchsorted(self.output_ts, t0, side="right"), t1)
 
     def _reaches(self, i, t1) -> jax.Array:
@@ -216,6 +219,8 @@ class TightDop853(diffrax.AbstractERK):
 
         if self.output_ts is None:
             last, state = _ALL, ()
+        elif not self.output_ts.shape[0]:  # no output time (a solve saving its ends only)
+            last, state = _STAGES, ()
         else:
             holds, after = self._outputs_up_to(t1, first_output[0])
             last, state = jnp.where(holds, _ALL, _STAGES), (after,)
