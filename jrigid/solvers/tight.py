@@ -104,8 +104,8 @@ class TightDop853(diffrax.AbstractERK):
         For a solve whose interpolation is used only to save at ``ts`` (diffrax's
         ``SaveAt(ts=ts)``, no dense output, no event): a step without an output time
         then evaluates the vector field 12 times instead of 15. Elsewhere its
-        interpolation is not valid. ``ts`` may be empty (``(0,)``): a solve that saves
-        only the ends of its steps, no step computes them.
+        interpolation is not valid. ``ts`` may be empty (``(0,)``), for a solve that saves
+        only its two ends: then no step computes them.
 
         Raises:
             ValueError: ``ts`` is not one-dimensional.
