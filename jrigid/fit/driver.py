@@ -462,9 +462,10 @@ def _judge(result: FitResult, problem, lm_state, *, max_iter, chi2_alpha, edge_t
                 )
             g = np.asarray(jac).T @ np.asarray(r)
             c0 = np.asarray(lap.cov_pinv) / scale
-            step_length = float(np.sqrt(max(g @ c0 @ g, 0.0) / scale)) if scale > 0 else 0.0
-            step = np.abs(c0 @ g) / np.maximum(1.0, np.abs(np.asarray(lap.flat)))
-            step_change = float(np.max(step)) if step.size else 0.0
+            step = c0 @ g  # the Gauss–Newton step (up to its sign)
+            step_length = float(np.sqrt(max(g @ step, 0.0) / scale)) if scale > 0 else 0.0
+            relative = np.abs(step) / np.maximum(1.0, np.abs(np.asarray(lap.flat)))
+            step_change = float(np.max(relative)) if relative.size else 0.0
             result.chi2, result.dof = lap.chi2, lap.dof
             result.chi2_dof = lap.chi2 / lap.dof if lap.dof > 0 else None
         result.laplace = lap

@@ -143,7 +143,7 @@ class TightDop853(diffrax.AbstractERK):
             return state
         # the first output time after t0, carried from step to step (diffrax keeps the
         # solver's state on a rejected step) instead of searched for in every step
-        return state + (jnp.searchsorted(self.output_ts, t0, side="right").astype(jnp.int32),)
+        return state + (self._first_after(t0),)
 
     def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
         solver = self.in_precision_of(y0)
@@ -176,7 +176,11 @@ class TightDop853(diffrax.AbstractERK):
         (``()`` bool; only with :attr:`output_ts`)."""
         if not self.output_ts.shape[0]:
             return jnp.array(False)
-        return self._reaches(jnp.searchsorted(self.output_ts, t0, side="right"), t1)
+        return self._reaches(self._first_after(t0), t1)
+
+    def _first_after(self, t0) -> jax.Array:
+        """``()`` int32: the index of the first of :attr:`output_ts` after ``t0``."""
+        return jnp.searchsorted(self.output_ts, t0, side="right").astype(jnp.int32)
 
     def _reaches(self, i, t1) -> jax.Array:
         """Whether :attr:`output_ts` has an ``i``-th time and it is ``≤ t1``."""
