@@ -36,7 +36,7 @@ import jax
 import jax.numpy as jnp
 
 from jrigid import quaternion as quat
-from jrigid._checks import as_float, check_shape, fail_if
+from jrigid._checks import as_float, as_floats, check_shape, fail_if
 
 __all__ = [
     "about_point",
@@ -66,7 +66,7 @@ __all__ = [
 
 def _matrix(rows) -> jax.Array:
     """Stack a nested list of equally batched scalars ``(...)`` into ``(..., r, c)``."""
-    flat = jnp.broadcast_arrays(*[as_float(e) for row in rows for e in row])
+    flat = as_floats(*[e for row in rows for e in row], broadcast=True)
     ncol = len(rows[0])
     stacked = jnp.stack(flat, axis=-1)
     return stacked.reshape(stacked.shape[:-1] + (len(rows), ncol))
@@ -101,7 +101,7 @@ def from_blocks(A, d) -> jax.Array:
     Returns:
         ``(..., n+1, n+1)``; batch dimensions of ``A`` and ``d`` broadcast.
     """
-    A, d = as_float(A), as_float(d)
+    A, d = as_floats(A, d)
     n = _dim_of_vector(d, "d")
     check_shape(A, "A", (n, n), why=f" to match d of shape {d.shape}")
     batch = jnp.broadcast_shapes(A.shape[:-2], d.shape[:-1])
@@ -158,7 +158,7 @@ def shear_2d(kx, ky=0.0) -> jax.Array:
     Returns:
         ``(..., 3, 3)``.
     """
-    kx, ky = as_float(kx), as_float(ky)
+    kx, ky = as_floats(kx, ky)
     one, zero = jnp.ones_like(kx), jnp.zeros_like(kx)
     return _matrix([[one, kx, zero], [ky, one, zero], [zero, zero, one]])
 
@@ -172,7 +172,7 @@ def shear_3d(xy=0.0, xz=0.0, yx=0.0, yz=0.0, zx=0.0, zy=0.0) -> jax.Array:
     Returns:
         ``(..., 4, 4)``.
     """
-    xy = as_float(xy)
+    xy, xz, yx, yz, zx, zy = as_floats(xy, xz, yx, yz, zx, zy)
     one, zero = jnp.ones_like(xy), jnp.zeros_like(xy)
     return _matrix(
         [
@@ -197,7 +197,7 @@ def about_point(T, pivot) -> jax.Array:
     Returns:
         ``(..., n+1, n+1)``.
     """
-    T, pivot = as_float(T), as_float(pivot)
+    T, pivot = as_floats(T, pivot)
     n = _dim_of_transform(T)
     _check_dim(pivot, n, "pivot", T)
     return translation(pivot) @ T @ translation(-pivot)
@@ -250,9 +250,9 @@ def rotation_3d_axis_angle(axis, angle, pivot=None) -> jax.Array:
     Returns:
         ``(..., 4, 4)``.
     """
-    axis = as_float(axis)
+    axis, angle = as_floats(axis, angle)
     _check_vector3(axis, "axis")
-    return rotation_3d(quat.from_axis_angle(axis, as_float(angle)), pivot)
+    return rotation_3d(quat.from_axis_angle(axis, angle), pivot)
 
 
 def rotation_3d_euler(seq: str, angles, pivot=None) -> jax.Array:
@@ -311,8 +311,13 @@ def compose(*transforms) -> jax.Array:
 def inverse(T) -> jax.Array:
     """General inverse of a homogeneous (affine or projective) matrix.
 
-    The matrix counts as singular when its smallest singular value is below
-    ``size · eps · largest``; that raises ``ValueError`` (or a runtime error under jit).
+    An affine matrix (last row ``(0, …, 0, 1)``) is inverted by blocks,
+    ``[[A⁻¹, −A⁻¹ d], [0, 1]]``, and counts as singular when the smallest singular value
+    of its linear part ``A`` is below ``n · eps`` times the largest: the size of the
+    translation does not enter (a translation by 1e4 in float32 is as invertible as
+    one by 1). Any other (projective) matrix is singular when the smallest singular
+    value of the whole matrix is below ``(n + 1) · eps`` times the largest. A singular
+    or non-finite matrix raises ``ValueError`` (or a runtime error under jit).
 
     Args:
         T: ``(..., n+1, n+1)``.
@@ -321,17 +326,39 @@ def inverse(T) -> jax.Array:
         ``(..., n+1, n+1)``.
     """
     T = as_float(T)
-    n1 = _dim_of_transform(T) + 1
-    sv = jax.lax.stop_gradient(jnp.linalg.svd(T, compute_uv=False))
-    tol = n1 * jnp.finfo(T.dtype).eps * sv[..., 0]
-    singular = ~(sv[..., -1] > tol)
+    n = _dim_of_transform(T)
+    last = T[..., n, :]
+    affine = jnp.all(last == jnp.broadcast_to(jnp.eye(1, n + 1, n, dtype=T.dtype)[0], last.shape),
+                     axis=-1)
+    eps = jnp.finfo(T.dtype).eps
+    sv_a = jax.lax.stop_gradient(jnp.linalg.svd(T[..., :n, :n], compute_uv=False))
+    sv_t = jax.lax.stop_gradient(jnp.linalg.svd(T, compute_uv=False))
+    sv = jnp.where(affine[..., None], sv_a[..., jnp.array([0, n - 1])],
+                   sv_t[..., jnp.array([0, n])])
+    ratio = jnp.where(sv[..., 0] > 0, sv[..., 1] / jnp.where(sv[..., 0] > 0, sv[..., 0], 1), 0)
+    regular = ratio > jnp.where(affine, n, n + 1) * eps
+    singular = ~(regular & jnp.all(jnp.isfinite(T), axis=(-2, -1)))
     T = fail_if(
         T,
         singular,
         "inverse: matrix is singular (or not finite)",
-        lambda: f"singular values {sv[singular] if singular.ndim else sv}",
+        lambda: "singular values: smallest / largest = "
+        f"{ratio[singular] if singular.ndim else ratio} (of the linear part if affine)",
     )
-    return jnp.linalg.inv(T)
+    # The branch not taken inverts an identity, so that its derivative stays finite.
+    # The affine branch is the Schur-complement inverse, exact in value for the last row
+    # (0, …, 0, 1) and with the general inverse's derivative in every entry.
+    pick = lambda a, b: jnp.where(affine[..., None, None], a, b)  # noqa: E731
+    A = pick(T[..., :n, :n], jnp.eye(n, dtype=T.dtype))
+    d, c, s = T[..., :n, n:], T[..., n:, :n], T[..., n:, n:]
+    A_inv = jnp.linalg.inv(A)
+    A_inv_d, c_A_inv = A_inv @ d, c @ A_inv
+    s_inv = 1.0 / jnp.where(affine[..., None, None], s - c @ A_inv_d, 1.0)
+    by_blocks = jnp.concatenate([
+        jnp.concatenate([A_inv + A_inv_d @ (s_inv * c_A_inv), -A_inv_d * s_inv], axis=-1),
+        jnp.concatenate([-s_inv * c_A_inv, s_inv], axis=-1)], axis=-2)
+    general = jnp.linalg.inv(pick(jnp.eye(n + 1, dtype=T.dtype), T))
+    return pick(by_blocks, general)
 
 
 def inverse_rigid(T) -> jax.Array:
@@ -388,7 +415,7 @@ def apply(T, X) -> jax.Array:
     Returns:
         ``(..., n+1)``.
     """
-    T, X = as_float(T), as_float(X)
+    T, X = as_floats(T, X)
     n = _dim_of_transform(T)
     _check_dim(X, n + 1, "X", T)
     return (T @ X[..., None])[..., 0]
@@ -412,7 +439,7 @@ def apply_to_points(T, p) -> jax.Array:
     Returns:
         ``(..., n)``.
     """
-    T, p = as_float(T), as_float(p)
+    T, p = as_floats(T, p)
     n = _check_cartesian(T, p, "p")
     Y = (T @ to_homogeneous(p, 1.0)[..., None])[..., 0]
     return Y[..., :n] / Y[..., n:]
@@ -430,7 +457,7 @@ def apply_to_vectors(T, v) -> jax.Array:
     Returns:
         ``(..., n)``.
     """
-    T, v = as_float(T), as_float(v)
+    T, v = as_floats(T, v)
     n = _check_cartesian(T, v, "v")
     return (T[..., :n, :n] @ v[..., None])[..., 0]
 

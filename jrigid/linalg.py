@@ -21,6 +21,23 @@ __all__ = [
 ]
 
 
+def _vectors(where: str, *named) -> list[jax.Array]:
+    """The ``(name, array, length)`` arguments as arrays, each checked (statically, so at
+    no cost under ``jit``) to have a last axis of its ``length``; a ``length`` of
+    ``None`` takes the first argument's."""
+    arrays, first = [], None
+    for name, a, given in named:
+        a = jnp.asarray(a)
+        length = first if given is None else given
+        if a.ndim < 1 or (length is not None and a.shape[-1] != length):
+            want = "(..., n)" if length is None else f"(..., {length})"
+            why = f" to match {named[0][0]}" if given is None and first is not None else ""
+            raise ValueError(f"{where}: {name} must have shape {want}{why}, got {a.shape}")
+        first = a.shape[-1] if first is None else first
+        arrays.append(a)
+    return arrays
+
+
 def dot(a: jax.Array, b: jax.Array) -> jax.Array:
     """``a · b`` over the last axis (a short one: 3 or 4; statically unrolled).
 
@@ -29,7 +46,11 @@ def dot(a: jax.Array, b: jax.Array) -> jax.Array:
 
     Returns:
         ``(...)``.
+
+    Raises:
+        ValueError: last axes of different lengths.
     """
+    a, b = _vectors("dot", ("a", a, None), ("b", b, None))
     total = a[..., 0] * b[..., 0]
     for i in range(1, a.shape[-1]):
         total = total + a[..., i] * b[..., i]
@@ -58,7 +79,10 @@ def unit(a: jax.Array) -> jax.Array:
 
 
 def cross(a: jax.Array, b: jax.Array) -> jax.Array:
-    """``a × b`` of ``(..., 3)`` vectors (batch shapes broadcast), shape ``(..., 3)``."""
+    """``a × b`` of ``(..., 3)`` vectors (batch shapes broadcast), shape ``(..., 3)``.
+
+    ``ValueError`` if a last axis is not of length 3."""
+    a, b = _vectors("cross", ("a", a, 3), ("b", b, 3))
     ax, ay, az = a[..., 0], a[..., 1], a[..., 2]
     bx, by, bz = b[..., 0], b[..., 1], b[..., 2]
     return jnp.stack([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx], axis=-1)
@@ -99,7 +123,13 @@ def euler_diagonal(moments: jax.Array, omega: jax.Array, torque: jax.Array) -> j
 
 
 def matvec(m: jax.Array, v: jax.Array) -> jax.Array:
-    """``m @ v`` for small ``(..., n, k)`` matrices and ``(..., k)`` vectors, shape ``(..., n)``."""
+    """``m @ v`` for small ``(..., n, k)`` matrices and ``(..., k)`` vectors, shape ``(..., n)``.
+
+    ``ValueError`` if ``v``'s last axis is not ``m``'s."""
+    m = jnp.asarray(m)
+    if m.ndim < 2:
+        raise ValueError(f"matvec: m must have shape (..., n, k), got {m.shape}")
+    (v,) = _vectors("matvec", ("v", v, m.shape[-1]))
     return jnp.stack([dot(m[..., i, :], v) for i in range(m.shape[-2])], axis=-1)
 
 
@@ -112,7 +142,14 @@ def solve3(m: jax.Array, b: jax.Array) -> jax.Array:
 
     Returns:
         ``(..., 3)``; non-finite where ``det m = 0``.
+
+    Raises:
+        ValueError: ``m`` not ``(..., 3, 3)`` or ``b`` not ``(..., 3)``.
     """
+    m = jnp.asarray(m)
+    if m.shape[-2:] != (3, 3):
+        raise ValueError(f"solve3: m must have shape (..., 3, 3), got {m.shape}")
+    (b,) = _vectors("solve3", ("b", b, 3))
     c0 = cross(m[..., :, 1], m[..., :, 2])
     c1 = cross(m[..., :, 2], m[..., :, 0])
     c2 = cross(m[..., :, 0], m[..., :, 1])

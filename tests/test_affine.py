@@ -594,3 +594,36 @@ def test_orthographic_axis_must_be_an_integer_index(axis):
 def test_shape_errors_name_the_expected_trailing_shape(call, expected):
     with pytest.raises(ValueError, match=expected):
         call()
+
+
+def test_inverse_of_a_far_translation_or_pivot_is_exact(float32):
+    """An affine matrix is singular only through its linear part: a translation (or a
+    pivot) far from the origin, whose homogeneous matrix has a smallest singular value
+    of about 1/|d|², is inverted exactly, in float32 too (it was refused above ~1.4e3)."""
+    for T in (affine.translation(jnp.array([2000.0, 0.0, 0.0])),
+              affine.rotation_2d(jnp.pi / 2, pivot=jnp.array([1500.0, 0.0])),
+              affine.scaling(jnp.full(3, 1e-7))):
+        inv = affine.inverse(T)
+        assert inv.dtype == jnp.float32
+        np.testing.assert_allclose(np.asarray(inv @ T), np.eye(T.shape[-1]), atol=1e-4)
+
+
+def test_inverse_derivative_is_the_general_inverses_in_every_entry():
+    """The affine matrix is inverted by blocks (Schur complement), which keeps the
+    derivative along the last row: d(T⁻¹) = −T⁻¹ dT T⁻¹ for any dT, as for a projective T."""
+    rng = np.random.default_rng(3)
+    for T in (np.asarray(affine.from_blocks(rng.normal(size=(3, 3)), rng.normal(size=3))),
+              rng.normal(size=(4, 4))):
+        dT = rng.normal(size=(4, 4))
+        _, tangent = jax.jvp(affine.inverse, (jnp.asarray(T),), (jnp.asarray(dT),))
+        inv = np.linalg.inv(T)
+        np.testing.assert_allclose(np.asarray(affine.inverse(T)), inv, atol=1e-13)
+        np.testing.assert_allclose(np.asarray(tangent), -inv @ dT @ inv, atol=1e-12)
+
+
+def test_python_scalars_take_the_arrays_dtype():
+    f32 = jnp.float32
+    assert affine.shear_2d(f32(0.2)).dtype == jnp.float32
+    assert affine.shear_3d(f32(0.2)).dtype == jnp.float32
+    assert affine.rotation_3d_axis_angle(jnp.ones(3, f32), 0.5).dtype == jnp.float32
+    assert affine.shear_3d(0.2).dtype == jnp.float64

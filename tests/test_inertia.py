@@ -597,3 +597,12 @@ def test_shape_function_checks_run_under_jit():
 def test_shape_errors_name_the_expected_trailing_shape(call, expected):
     with pytest.raises(ValueError, match=expected):
         call()
+
+
+def test_python_scalars_take_the_arrays_dtype():
+    f32 = jnp.float32
+    assert inertia.sphere(f32(1.0), 2.0).dtype == jnp.float32
+    assert inertia.t_handle_moments(f32(1.0)).dtype == jnp.float32
+    assert inertia.parallel_axis(inertia.to_tensor(jnp.ones(3, f32)), 1.0,
+                                 jnp.ones(3, f32)).dtype == jnp.float32
+    assert inertia.t_handle_moments(1.0).dtype == jnp.float64

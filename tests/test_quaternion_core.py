@@ -561,3 +561,11 @@ def test_float32_core(float32):
 def test_xyzw_shape_error_names_the_scalar_last_order():
     with pytest.raises(ValueError, match=r"q_xyzw must have shape .*\(x, y, z, w\)"):
         jq.from_xyzw(jnp.ones(3))
+
+
+def test_axis_of_a_rotation_by_a_subnormal_size_angle_is_kept():
+    """A vector part whose squares underflow (below ~1e-154 in float64) still has its
+    axis and angle, as scipy's rotation vector has."""
+    axis, angle = jq.to_axis_angle(jnp.array([1.0, 0.0, 3e-200, 4e-200]))
+    np.testing.assert_allclose(np.asarray(axis), [0.0, 0.6, 0.8], rtol=1e-15)
+    np.testing.assert_allclose(float(angle), 1e-199, rtol=1e-15)

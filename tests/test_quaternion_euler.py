@@ -204,3 +204,12 @@ def test_symmetric_middle_angle_at_pi_is_plus_pi(seq):
     expected = Rotation.from_quat(q, scalar_first=True).as_euler(seq)
     np.testing.assert_allclose(angles[1], np.pi, atol=1e-12)
     np.testing.assert_allclose(angles[1], expected[1], atol=1e-12)
+
+
+@pytest.mark.parametrize("bad", [[np.nan, 0.0, 0.0, 1.0], [0.0, np.inf, 0.0, 0.0]])
+@pytest.mark.parametrize("seq", ["XYZ", "ZXZ", "xyz", "zxz"])
+def test_a_non_finite_quaternion_has_no_angles_and_no_lock(seq, bad):
+    """All three angles NaN (one NaN entry used to leave the others finite, the third
+    forced to 0 as at a lock) and no gimbal lock reported."""
+    assert np.all(np.isnan(np.asarray(jq.to_euler(seq, jnp.asarray(bad)))))
+    assert not bool(jq.gimbal_lock(seq, jnp.asarray(bad)))

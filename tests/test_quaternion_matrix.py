@@ -290,3 +290,12 @@ def test_float32_matrices(float32):
     ):
         assert m32.dtype == jnp.float32
         assert np.all(np.isfinite(m32))
+
+
+@pytest.mark.parametrize("entry", [np.inf, -np.inf, np.nan])
+def test_a_non_finite_matrix_gives_an_all_nan_quaternion(entry):
+    """An inf made ``RᵀR − 1`` NaN, which passed the orthogonality test: half NaN out."""
+    for i in range(9):
+        m = np.eye(3)
+        m.flat[i] = entry
+        assert np.all(np.isnan(np.asarray(jq.from_matrix(jnp.asarray(m))))), i

@@ -186,14 +186,14 @@ def validate(inertia, *, allow_nonphysical: bool = False, kind: str | None = Non
 
 
 def _mass(m, name: str = "mass") -> jax.Array:
-    m = as_float(m)
+    m = as_float(m, weak=True)  # (a Python scalar takes the dtype it meets)
     return fail_if(
         m, ~(jnp.isfinite(m) & (m > 0)), f"{name} must be finite and > 0", lambda: f"{m}"
     )
 
 
 def _size(x, name: str) -> jax.Array:
-    x = as_float(x)
+    x = as_float(x, weak=True)  # (a Python scalar takes the dtype it meets)
     return fail_if(
         x, ~(jnp.isfinite(x) & (x >= 0)), f"{name} must be finite and >= 0", lambda: f"{x}"
     )

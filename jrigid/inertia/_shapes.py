@@ -6,7 +6,7 @@ import jax
 import jax.numpy as jnp
 
 from jrigid import quaternion as quat
-from jrigid._checks import as_float, is_traced
+from jrigid._checks import as_float, as_floats, is_traced
 
 from ._checks import _mass, _size
 from ._tensors import parallel_axis, rotate_tensor, to_tensor
@@ -32,12 +32,12 @@ __all__ = [
 def _body(m, **sizes) -> list[jax.Array]:
     """Checked mass and sizes of a shape, broadcast to one batch shape."""
     checked = [_mass(m), *(_size(v, k) for k, v in sizes.items())]
-    return jnp.broadcast_arrays(*checked)
+    return as_floats(*checked, broadcast=True)
 
 
 def _moments(*columns) -> jax.Array:
     """Stack three broadcast-compatible ``(...)`` arrays into ``(..., 3)``."""
-    return jnp.stack(jnp.broadcast_arrays(*[as_float(c) for c in columns]), axis=-1)
+    return jnp.stack(as_floats(*columns, broadcast=True), axis=-1)
 
 
 def ellipsoid(m, a, b, c) -> jax.Array:
@@ -190,8 +190,8 @@ def t_handle_parts(
     """
     sizes = dict(bar_length=bar_length, bar_radius=bar_radius, stem_length=stem_length,
                  stem_radius=stem_radius)  # fmt: skip
-    bar_length, bar_radius, stem_length, stem_radius = jnp.broadcast_arrays(
-        *(_mass(v, k) for k, v in sizes.items())
+    bar_length, bar_radius, stem_length, stem_radius = as_floats(
+        *(_mass(v, k) for k, v in sizes.items()), broadcast=True
     )
     v_bar = jnp.pi * bar_radius**2 * bar_length
     v_stem = jnp.pi * stem_radius**2 * stem_length
@@ -240,6 +240,8 @@ def t_handle_moments(mass=1.0, **dims) -> jax.Array:
         True
     """
     mass = _mass(mass)
+    # the dtype of the inputs (a float32 mass with the default sizes stays float32)
+    dtype = jnp.result_type(mass, *(as_float(v, weak=True) for v in dims.values()))
     total = 0.0
     for part in t_handle_parts(**dims):
         m = jnp.multiply(*jnp.broadcast_arrays(mass, part["mass_fraction"]))
@@ -252,4 +254,4 @@ def t_handle_moments(mass=1.0, **dims) -> jax.Array:
         ratio = float(jnp.max(off / jnp.abs(total).max(axis=(-2, -1))))
         if ratio > 1e-9:
             raise ValueError(f"T-handle tensor is not diagonal (off-diagonal {ratio:.3g})")
-    return diagonal
+    return diagonal.astype(dtype)

@@ -7,7 +7,7 @@ import jax
 import jax.numpy as jnp
 
 from jrigid import quaternion as quat
-from jrigid._checks import as_float, check_shape, fail_if
+from jrigid._checks import as_float, as_floats, check_shape, fail_if
 
 from ._checks import _check_moments, _check_tensor, _mass, _size
 
@@ -56,7 +56,7 @@ def from_point_masses(masses, positions, origin=None) -> jax.Array:
     Returns:
         ``(..., 3, 3)``.
     """
-    masses, positions = as_float(masses), as_float(positions)
+    masses, positions = as_floats(masses, positions)
     if positions.ndim < 2 or positions.shape[-1] != 3:
         raise ValueError(f"positions must have shape (..., N, 3); got shape {positions.shape}")
     n = positions.shape[-2]
@@ -102,9 +102,10 @@ def parallel_axis(I_cm, mass, d) -> jax.Array:
     Returns:
         ``(..., 3, 3)``.
     """
-    I_cm, mass, d = as_float(I_cm), _mass(mass), as_float(d)
+    I_cm, mass, d = as_floats(I_cm, _mass(mass), d)
     _check_tensor(I_cm, "I_cm")
     check_shape(d, "d", (3,))
+    d = fail_if(d, ~jnp.all(jnp.isfinite(d)), "d must be finite", lambda: f"{d}")
     batch = jnp.broadcast_shapes(I_cm.shape[:-2], mass.shape, d.shape[:-1])
     I_cm = jnp.broadcast_to(I_cm, batch + (3, 3))
     mass = jnp.broadcast_to(mass, batch)
@@ -127,7 +128,7 @@ def rotate_tensor_by_matrix(inertia, R) -> jax.Array:
     Returns:
         ``(..., 3, 3)``.
     """
-    inertia, R = as_float(inertia), as_float(R)
+    inertia, R = as_floats(inertia, R)
     _check_tensor(inertia)
     _check_tensor(R, "R")
     return R @ inertia @ jnp.swapaxes(R, -1, -2)

@@ -16,7 +16,10 @@ Bad input:
   check, free under ``jit``), as do invalid Euler sequences;
 * conversions do not raise on bad values: a zero or non-finite quaternion gives NaN.
   Any finite non-zero norm is fine (``1e-300`` to ``1e300``): functions that do not
-  depend on the scale rescale by the largest component before squaring;
+  depend on the scale rescale by the largest component before squaring. (Components
+  below the smallest normal float, about ``2.2e-308`` in float64 and ``1.2e-38`` in
+  float32, are subnormal, and XLA on a CPU flushes them to zero: such a quaternion
+  counts as zero);
 * :func:`from_matrix` refuses a reflection or a matrix far from orthogonal: ``ValueError``
   for concrete input, NaN under ``jit``/``vmap``/``grad`` (see its docstring);
 * :func:`check_quaternion` and :func:`check_rotation_matrix` raise ``ValueError`` on

@@ -287,12 +287,13 @@ def to_axis_angle(q: ArrayLike) -> tuple[jax.Array, jax.Array]:
     """
     q = canonicalize(rescale(quaternion_arg(q))[0])
     w, v = q[..., 0], q[..., 1:]
+    v, scale = rescale(v)  # (a vector part below sqrt(tiny) still has its direction)
     n2 = dot(v, v)
     nonzero = n2 > 0
     n = jnp.sqrt(jnp.where(nonzero, n2, jnp.ones_like(n2)))
     default = jnp.zeros_like(v).at[..., 0].set(1)
     axis = jnp.where(nonzero[..., None], v / n[..., None], default)
-    angle = 2.0 * jnp.arctan2(jnp.where(nonzero, n, jnp.zeros_like(n)), w)
+    angle = 2.0 * jnp.arctan2(jnp.where(nonzero, n * scale[..., 0], jnp.zeros_like(n)), w)
     # The zero quaternion is no rotation and a non-finite one (all NaN after rescale)
     # has no direction: NaN, like normalize.
     bad = (~nonzero & (w == 0)) | jnp.isnan(w)

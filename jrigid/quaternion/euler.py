@@ -138,7 +138,12 @@ def gimbal_lock(seq: str, q: ArrayLike, eps: float | None = None) -> jax.Array:
     eps = _default_eps(q.dtype) if eps is None else eps
     a, b, c, d, *_ = _components(seq, q)
     _, case1, case2 = _middle_and_cases(a, b, c, d, eps)
-    return case1 | case2
+    return (case1 | case2) & _rotation(q)
+
+
+def _rotation(q: jax.Array) -> jax.Array:
+    """``(...)``: whether the rescaled ``q`` stands for a rotation (finite and non-zero)."""
+    return jnp.all(jnp.isfinite(q), axis=-1) & jnp.any(q != 0, axis=-1)
 
 
 def to_euler(seq: str, q: ArrayLike, eps: float | None = None) -> jax.Array:
@@ -148,7 +153,9 @@ def to_euler(seq: str, q: ArrayLike, eps: float | None = None) -> jax.Array:
     second angle is ``2 atan2(|(c, d)|, |(a, b)|)`` (minus π/2 for Tait-Bryan
     sequences), and the others are ``atan2(b, a) ± atan2(d, c)``. At gimbal lock the
     third angle is set to zero (see the module docstring). ``q`` need not be unit (any
-    finite non-zero scale); the zero quaternion gives NaN.
+    finite non-zero scale); a zero or non-finite quaternion gives NaN angles. The first
+    and third angles are wrapped as scipy wraps them, to ``[-π, π)``: an angle within
+    rounding of ±π may come out as π in one library and −π in the other.
 
     Args:
         seq: one of :data:`EULER_SEQUENCES` (static).
@@ -191,5 +198,5 @@ def to_euler(seq: str, q: ArrayLike, eps: float | None = None) -> jax.Array:
     # [0, π] (symmetric) or [-π/2, π/2] (Tait-Bryan), and wrapping it would turn π into -π.
     first, third = (jnp.remainder(a + math.pi, 2.0 * math.pi) - math.pi for a in (first, third))
     angles = jnp.stack([first, middle, third], axis=-1)
-    zero = jnp.all(q == 0, axis=-1, keepdims=True)  # no rotation: NaN, as in normalize
-    return jnp.where(zero, jnp.nan, angles)
+    # no rotation (a zero or non-finite quaternion): NaN, as in normalize
+    return jnp.where(_rotation(q)[..., None], angles, jnp.nan)

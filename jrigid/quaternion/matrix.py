@@ -94,7 +94,7 @@ def from_matrix(matrix: ArrayLike, *, atol: float | None = None) -> jax.Array:
     "Not converted" means: with concrete input, ``ValueError`` naming the problem;
     under a JAX transformation (``jit``, ``vmap``, ``grad``: traced input, where no
     Python error can depend on values) the result is NaN for those matrices. Non-finite
-    input gives NaN.
+    input (NaN or inf anywhere) gives an all-NaN quaternion.
 
     Args:
         matrix: ``(..., 3, 3)`` rotation matrix.
@@ -113,8 +113,9 @@ def from_matrix(matrix: ArrayLike, *, atol: float | None = None) -> jax.Array:
     gram = jnp.swapaxes(m, -1, -2) @ m
     eye = jnp.broadcast_to(jnp.eye(3, dtype=m.dtype), gram.shape)
     ortho_err = jnp.max(jnp.abs(gram - eye), axis=(-2, -1))
-    skewed = ortho_err > tol
-    reflection = ~skewed & (_det3(m) < 0)
+    finite = jnp.all(jnp.isfinite(m), axis=(-2, -1))  # (an inf entry makes ortho_err NaN)
+    skewed = finite & (ortho_err > tol)
+    reflection = finite & ~skewed & (_det3(m) < 0)
     if not is_traced(m):
         for bad, what in (
             (skewed, f"is not orthogonal (max |RᵀR - 1| > {tol:g}); use "
@@ -125,7 +126,7 @@ def from_matrix(matrix: ArrayLike, *, atol: float | None = None) -> jax.Array:
                 where = f" at batch index {tuple(int(i) for i in jnp.argwhere(bad)[0])}"
                 raise ValueError(f"from_matrix: matrix{where if bad.ndim else ''} {what}")
     q = _shepperd(m)
-    return jnp.where((skewed | reflection)[..., None], jnp.nan, q)
+    return jnp.where((skewed | reflection | ~finite)[..., None], jnp.nan, q)
 
 
 def _shepperd(m: jax.Array) -> jax.Array:
