@@ -373,6 +373,10 @@ def test_driver_errors():
         (lambda: fit.Orientations(np.arange(3.0), np.zeros((3, 3))), r"shape \(T, 4\)"),
         (lambda: fit.AxisDirections(np.arange(3.0), np.ones((3, 3)), axis=3), "axis"),
         (lambda: fit.AxisDirections(np.arange(3.0), np.full((3, 3), np.inf)), "NaN or inf"),
+        (lambda: fit.AxisDirections(np.arange(3.0), np.ones((3, 3)), axis=True), "axis"),
+        (lambda: fit.Gyroscope(np.arange(3.0), np.ones((3, 3)) + 0j), "must be real"),
+        (lambda: fit.WobbleRatio(np.linspace(0.0, 1.0, 3), 2.0, 1.0, axis=2.0), "axis"),
+        (lambda: fit.moment_ratios_raw(jnp.array([1.0, 2.0, 3.0])), "flat body"),
         (
             lambda: fit.Problem(
                 fit.Exact(build), fit.Gyroscope([0.0, 1.0], np.zeros((2, 3))), t0=0.5

@@ -12,6 +12,7 @@ import pytest
 from scipy import stats
 
 from jrigid import exact, fit, initial
+from jrigid import quaternion as quat
 from jrigid.body import RigidBody
 from jrigid.scene import Scene
 
@@ -121,6 +122,32 @@ def test_good_fit_succeeds_with_chi2_dof_near_one(example):
     m, m_sigma = fit.propagate(lambda p: fit.moment_ratios(p["shape"]), lap)
     assert bool(jnp.all(jnp.abs(m - TRUE_MOMENTS) < 4 * m_sigma))
 
+
+
+def spin_model(theta, t, forward_mode=False):
+    """A body turning at the constant rate ``w`` about a fixed axis: ``q = exp(t w / 2)``."""
+    w = theta["w"]
+    return fit.Prediction(quat.from_rotvec(t[:, None] * w[None, :]),
+                          jnp.broadcast_to(w, t.shape + (3,)), IDENTITY)
+
+
+def test_axis_directions_count_two_degrees_per_sample():
+    """A unit direction's three residuals lie, to first order, in a plane: χ² of a fit
+    with the right σ is near 2 per sample (counted as 3, χ²/dof came out 0.56–0.68 and
+    the fit warned that σ was too large), and without σ the error bars are the same."""
+    ts = np.linspace(0.0, 4.0, 201)
+    w = jnp.array([0.5, 0.3, 1.0])
+    q = quat.from_rotvec(jnp.asarray(ts)[:, None] * w[None, :])
+    u = np.asarray(quat.rotate(q, jnp.broadcast_to(jnp.array([0.0, 0.0, 1.0]), (201, 3))))
+    u = u + 0.01 * np.random.default_rng(0).standard_normal(u.shape)  # isotropic, σ = 0.01
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", fit.FitWarning)
+        res = fit.fit(fit.Problem(spin_model, fit.AxisDirections(ts, u, sigma=0.01)),
+                      {"w": w + 0.05}, method="lm")
+    assert res.success and res.dof == 2 * 201 - 3
+    assert abs(res.chi2 - res.dof) < 4 * math.sqrt(2 * res.dof), res.chi2_dof
+    unknown = fit.laplace(fit.Problem(spin_model, fit.AxisDirections(ts, u)), res.params)
+    np.testing.assert_allclose(unknown.sigma["w"], res.sigma["w"], rtol=0.15)
 
 
 def test_fit_from_a_sphere_moves_the_shape_or_says_it_failed(example):
@@ -257,6 +284,19 @@ def test_rank_deficient_jacobian_flagged_and_named():
     assert "0.707·a − 0.707·b" in message  # the pair the data see only as a + b
     assert "1·c" in message  # the parameter the model ignores
     assert res.laplace.rank == 2 and res.dof == 3 * 9 - 2
+
+
+def test_an_ignored_vector_parameter_is_undetermined_in_every_direction():
+    """An array the model never reads has no gauge (a scale the model ignores by design,
+    as a raw quaternion's norm): both of its directions are named, not one."""
+    problem, _, _ = wave_problem()
+    params = {"f": jnp.asarray(2.0), "a": jnp.asarray(1.0), "junk": jnp.array([0.7, 0.3])}
+    with pytest.warns(fit.FitWarning) as rec:
+        lap = fit.laplace(problem, params)
+    message = " ".join(str(r.message) for r in rec)
+    assert "1·junk[0]; 1·junk[1]" in message, message
+    assert np.asarray(lap.undetermined).shape == (2, 4) and np.asarray(lap.gauge).size == 0
+    assert np.all(np.isinf(lap.sigma["junk"])) and lap.rank == 2
 
 
 def test_laplace_gives_inf_for_undetermined_directions_and_names_them():
@@ -471,6 +511,10 @@ def test_nan_start_of_a_body_raises_value_error_before_building_it(example):
         ({"edge_tol": -1.0}, "edge_tol"),
         ({"max_iter": True}, "max_iter"),
         ({"method": "lm", "learning_rate": 0.0}, "damping"),
+        ({"ftol": float("nan")}, "ftol"),
+        ({"gtol": -1.0}, "gtol"),
+        ({"rcond": -1.0}, "rcond"),
+        ({"horizons": 0.5}, "horizons must be a sequence"),
     ],
 )
 def test_bad_options_raise_value_error(kwargs, match):

@@ -274,6 +274,11 @@ def fit(
         raise ValueError(f"chi2_alpha must be in [0, 1), got {chi2_alpha!r}")
     if not edge_tol >= 0.0:
         raise ValueError(f"edge_tol must be >= 0, got {edge_tol!r}")
+    for name, value in (("gtol", gtol), ("ftol", ftol)):
+        if not value >= 0.0:  # (NaN too: a rule that can never be met)
+            raise ValueError(f"{name} must be a number >= 0, got {value!r}")
+    if rcond is not None and not 0.0 <= rcond < 1.0:
+        raise ValueError(f"rcond must be in [0, 1) or None, got {rcond!r}")
     params = _checked_start(params0)
     is_problem = isinstance(problem, Problem)
     marquardt = optimizer is None and method == "lm"
@@ -358,7 +363,11 @@ def _stages(problem, horizons) -> list:
     """The problems of a horizon schedule: restricted to growing records, then whole."""
     if not isinstance(problem, Problem):
         raise ValueError("horizons needs a Problem (it shortens the observation record)")
-    fractions = [float(h) for h in horizons]
+    try:
+        fractions = [float(h) for h in horizons]
+    except (TypeError, ValueError) as error:
+        raise ValueError("horizons must be a sequence of increasing fractions of the record "
+                         f"in (0, 1], e.g. (0.25, 0.5), got {horizons!r}") from error
     if not all(0.0 < h <= 1.0 for h in fractions) or any(
         b <= a for a, b in zip(fractions, fractions[1:], strict=False)
     ):

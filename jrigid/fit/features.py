@@ -114,7 +114,8 @@ class _Feature(Observation):
     ):
         if method not in _METHODS:
             raise ValueError(f"method must be one of {_METHODS}, got {method!r}")
-        if axis not in (0, 1, 2):
+        if isinstance(axis, bool) or not isinstance(axis, (int, np.integer)) or axis not in (
+                0, 1, 2):
             raise ValueError(f"axis must be 0, 1 or 2, got {axis!r}")
         self.ts = sample_times(ts)
         if method == "trajectory" and self.ts.shape[0] < _MIN_TRAJECTORY_SAMPLES:

@@ -160,6 +160,8 @@ def sample_times(ts) -> jax.Array:
 
 
 def _data(x, ts, width: int, name: str) -> jax.Array:
+    if np.iscomplexobj(x):
+        raise ValueError(f"{name} must be real, got complex values")
     x_np = np.asarray(x, dtype=float)
     if x_np.ndim != 2 or x_np.shape[1] != width:
         raise ValueError(f"{name} must have shape (T, {width}), got {x_np.shape}")
@@ -263,6 +265,13 @@ class AbstractObservation(eqx.Module):
         """
         per = self.size // self.ts.shape[0]
         return jnp.repeat(self.ts <= t_end, per, total_repeat_length=self.size)
+
+    def degrees(self, t_end) -> int:
+        """Degrees of freedom of the residuals of samples at times ``≤ t_end``: how many
+        independent normal variables their χ² sums under the noise model. By default
+        one per residual; fewer where residuals are tied (:class:`AxisDirections`: the
+        difference of two unit vectors lies in a plane, two per sample)."""
+        return int(np.sum(np.asarray(self.in_window(t_end))))
 
 
 #: The name the base class has always had; :class:`AbstractObservation` itself.
@@ -387,7 +396,9 @@ class AxisDirections(_PerSample):
     Attributes:
         ts: ``(T,)`` times.
         directions: ``(T, 3)`` measured directions in space (normalised here).
-        sigma: ``(T, 3)`` noise per component (scalar broadcasts; ``None``: unknown).
+        sigma: ``(T, 3)`` noise per component (scalar broadcasts; ``None``: unknown): for
+            a scalar σ, the angular noise in radians in each direction across ``û``. The
+            three residuals of a sample count as two degrees of freedom (:meth:`degrees`).
         axis: ``(3,)`` the marked axis in principal body coordinates (an int ``i`` means
             principal axis ``i + 1``); normalised.
     """
@@ -403,7 +414,9 @@ class AxisDirections(_PerSample):
         self.ts = sample_times(ts)
         self.directions = _unit_rows(_data(directions, self.ts, 3, "directions"), "directions")
         self._noise(sigma)
-        if isinstance(axis, int):
+        if isinstance(axis, bool):
+            raise ValueError(f"axis must be 0, 1, 2 or a 3-vector, got {axis}")
+        if isinstance(axis, (int, np.integer)):
             if axis not in (0, 1, 2):
                 raise ValueError(f"axis must be 0, 1, 2 or a 3-vector, got {axis}")
             axis = np.eye(3)[axis]
@@ -421,3 +434,10 @@ class AxisDirections(_PerSample):
     def residuals(self, pred: Prediction) -> jax.Array:
         """``(3T,)`` whitened residuals ``(R a − û)/σ``."""
         return self._whitened(self.predicted(pred) - self.directions)
+
+    def degrees(self, t_end) -> int:
+        """Two per sample: ``R a`` and ``û`` are unit vectors, so to first order their
+        difference lies in the plane perpendicular to ``û``, and its χ² has two degrees
+        of freedom, not three (the noise model: σ the same in the two directions across
+        ``û``, in radians)."""
+        return 2 * int(np.sum(np.asarray(self.ts) <= np.asarray(t_end)))

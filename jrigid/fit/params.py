@@ -34,11 +34,12 @@ import math
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax.typing import ArrayLike
 
 from jrigid import inertia as _inertia
 from jrigid import quaternion as quat
-from jrigid._checks import as_float
+from jrigid._checks import as_float, fail_if
 
 __all__ = [
     "inertia_tensor",
@@ -106,12 +107,17 @@ def moment_ratios_raw(moments_: ArrayLike, *, floor: float = DEFAULT_FLOOR) -> j
         ``(..., 2)`` raw vector with ``moment_ratios(raw, sum(moments_)) == moments_``.
 
     Raises:
-        ValueError: non-physical moments (concrete input), via ``jrigid.inertia.validate``.
+        ValueError: non-physical moments (concrete input), via ``jrigid.inertia.validate``,
+            or moments whose fractions do not all exceed ``floor`` (a flat body).
     """
     m = _inertia.validate(as_float(moments_), kind="moments")
     i1, i2, i3 = m[..., 0], m[..., 1], m[..., 2]
     half = jnp.stack([i2 + i3 - i1, i1 + i3 - i2, i1 + i2 - i3], axis=-1) / 2.0
     p = half / jnp.sum(half, axis=-1, keepdims=True)
+    p = fail_if(p, ~jnp.all(p > floor, axis=-1),
+                f"moments too close to a flat body: every fraction (I_j + I_k - I_i) / ΣI "
+                f"must exceed floor = {floor:g}, where the parametrisation ends",
+                lambda: f"fractions {np.asarray(p)}")
     s = (p - floor) / (1.0 - 3.0 * floor)
     s = jnp.maximum(s, jnp.finfo(s.dtype).tiny)
     return jnp.log(s[..., :2]) - jnp.log(s[..., 2:])

@@ -221,8 +221,11 @@ class Problem(eqx.Module):
 
     @property
     def active_size(self) -> int:
-        """Number of residuals up to :attr:`horizon` (all of them unless :meth:`until`)."""
-        return int(sum(np.sum(np.asarray(o.in_window(self.horizon))) for o in self.observations))
+        """Degrees of freedom of the residuals up to :attr:`horizon` (all of them unless
+        :meth:`until`): one per residual, except where an observation's residuals are
+        tied (:meth:`AbstractObservation.degrees`, e.g. two per sample of
+        :class:`~jrigid.fit.AxisDirections`). χ²/dof and the tests count these."""
+        return sum(o.degrees(self.horizon) for o in self.observations)
 
     def until(self, t_end) -> Problem:
         """The same problem with only the observations up to ``t_end``.

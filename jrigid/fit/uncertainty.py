@@ -258,7 +258,9 @@ def _sparse_basis(basis: np.ndarray) -> np.ndarray:
 
 
 def _gauge_directions(params, scaled_jac, d, cut) -> np.ndarray:
-    """``(P, G)`` unit radial directions of the parameter arrays the model uses only up to scale."""
+    """``(P, G)`` unit radial directions of the parameter arrays the model uses only up to
+    scale. An array the model does not use at all (every direction of it below ``cut``)
+    has no gauge: all of its directions are undetermined."""
     leaves = jax.tree_util.tree_leaves(params)
     out = []
     offset = 0
@@ -266,7 +268,8 @@ def _gauge_directions(params, scaled_jac, d, cut) -> np.ndarray:
     for leaf in leaves:
         size = int(np.size(leaf))
         x = np.ravel(np.asarray(leaf, dtype=float))
-        if size >= 2 and np.linalg.norm(x) > 0:
+        used = size and np.linalg.norm(scaled_jac[:, offset:offset + size], 2) > cut
+        if size >= 2 and np.linalg.norm(x) > 0 and used:
             u = np.zeros(p)
             u[offset : offset + size] = x / np.linalg.norm(x)
             us = d * u
