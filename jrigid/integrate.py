@@ -155,6 +155,9 @@ def _check_saveat(saveat) -> None:
                 "saveat with a custom fn is not supported: jrigid derives every output from "
                 "the saved states (use the Trajectory's fields)"
             )
+    if not isinstance(saveat.subs, diffrax.SubSaveAt):
+        raise ValueError("saveat with several SubSaveAt (a pytree of subs) is not supported: "
+                         "give one diffrax.SaveAt(t0=..., t1=..., ts=..., steps=...)")
     if not (saveat.subs.t0 or saveat.subs.t1 or saveat.subs.ts is not None or saveat.subs.steps):
         raise ValueError("saveat must save something (t0, t1, ts or steps), not only dense")
 
@@ -347,7 +350,14 @@ def _solve_arrays(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoin
         stepsize_controller = controller(ts, rtol, atol, layout=flat, formulation=formulation,
                                          unit_time=saves_itself)
     record = isinstance(stepsize_controller, VectorPIDController)
-    if record and not saveat.controller_state:  # its record of non-finite trial steps
+    if user_saveat:
+        # the user's outputs, and the end of the solve (the time it reached, for t_stop
+        # and the failure report); dense=True keeps the interpolation here too
+        saveat = diffrax.SaveAt(subs=(saveat.subs, diffrax.SubSaveAt(t1=True)),
+                                dense=saveat.dense or dense, solver_state=saveat.solver_state,
+                                controller_state=saveat.controller_state or record,
+                                made_jump=saveat.made_jump)
+    elif record and not saveat.controller_state:  # its record of non-finite trial steps
         saveat = diffrax.SaveAt(subs=saveat.subs, dense=saveat.dense,
                                 solver_state=saveat.solver_state, controller_state=True,
                                 made_jump=saveat.made_jump)
@@ -357,6 +367,8 @@ def _solve_arrays(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoin
               event=flat.event(formulation.event() if event is None else event),
               unit_time=saves_itself)
     saved_ts, ys = sol.ts, sol.ys
+    if user_saveat:
+        (saved_ts, end_ts), (ys, end_ys) = sol.ts, sol.ys
     if ends_only:  # (t0, t_end) → the layout of SaveAt(ts=ts, t1=True): (t0, t_end, t_end)
         saved_ts, ys = (jnp.concatenate([a, a[-1:]]) for a in (sol.ts, sol.ys))
     elif saves_itself:
@@ -372,8 +384,9 @@ def _solve_arrays(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoin
     interpolation = flat.interpolation(sol.interpolation) if (dense or saveat.dense) else None
     trials = stepsize_controller.nonfinite_trials(sol.controller_state) if record else None
     if user_saveat:
-        traj = _finish_saved(scene, formulation, ts, sol, ys, interpolation, invalid, event,
-                             trials)
+        end = (end_ts[-1], jax.tree_util.tree_map(lambda a: a[-1], flat.states(end_ys)))
+        traj = _finish_saved(scene, formulation, ts, sol, saved_ts, ys, end, interpolation,
+                             invalid, event, trials)
     else:
         traj = finish(scene, formulation, ts, saved_ts, ys, sol.result, sol.stats,
                       interpolation, invalid, user_event=event is not None,
@@ -381,14 +394,13 @@ def _solve_arrays(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoin
     return traj, cause, messages
 
 
-def _finish_saved(scene, formulation, ts, sol, ys, interpolation, invalid, event, trials):
-    """The trajectory of a user's ``SaveAt``: its times as diffrax filled them (``inf``
-    padding becomes NaN outputs); ``ys`` are the saved states as the formulation's
-    variables."""
-    saved = jnp.isfinite(sol.ts) & ~invalid
-    t_end = jnp.max(jnp.where(jnp.isfinite(sol.ts), sol.ts, -jnp.inf))
-    i_end = jnp.argmax(sol.ts == t_end)
-    y_end = jax.tree_util.tree_map(lambda a: a[i_end], ys)
+def _finish_saved(scene, formulation, ts, sol, saved_ts, ys, end, interpolation, invalid,
+                  event, trials):
+    """The trajectory of a user's ``SaveAt``: its times ``saved_ts`` as diffrax filled
+    them (``inf`` padding becomes NaN outputs); ``ys`` are the saved states as the
+    formulation's variables; ``end`` is ``(t, y)`` where the solve stopped."""
+    saved = jnp.isfinite(saved_ts) & ~invalid
+    t_end, y_end = end
 
     def _mask(a):
         keep = saved.reshape(saved.shape + (1,) * (a.ndim - 1))
@@ -400,7 +412,7 @@ def _finish_saved(scene, formulation, ts, sol, ys, interpolation, invalid, event
                       event is not None, trials)
     result = jnp.where(invalid, jnp.int32(Result.invalid_input), result)
     stats = {k: sol.stats[k] for k in ("num_steps", "num_accepted_steps", "num_rejected_steps")}
-    return Trajectory.build(scene, formulation, jnp.where(saved, sol.ts, jnp.nan), ys,
+    return Trajectory.build(scene, formulation, jnp.where(saved, saved_ts, jnp.nan), ys,
                             stats=stats, result=result, t_stop=t_end,
                             interpolation=interpolation)
 

@@ -240,7 +240,7 @@ class TopConstants(eqx.Module):
 
     Attributes:
         tensor: ``(3, 3)`` inertia ``I_p`` about the pivot, body frame.
-        g_hat: ``(3,)`` direction of gravity (space frame).
+        g_hat: ``(3,)`` direction of gravity (space frame; zero when ``g = 0``).
         lever_weight: ``(3,)`` ``M |g| r`` (``r`` the centre of mass from the pivot).
         r_hat: ``(3,)`` ``r / |r|`` (zero without a lever arm).
         weight: ``()`` ``M |g| |r|``.
@@ -277,8 +277,11 @@ class TopConstants(eqx.Module):
         values = jnp.stack([kinetic + potential, jnp.sum(L * g_body), jnp.sum(L * self.r_hat),
                             jnp.zeros((), dtype)])
         scales = jnp.stack([kinetic + self.weight, momentum, momentum, jnp.ones((), dtype)])
-        active = jnp.stack([jnp.array(True), jnp.array(True), self.symmetric, jnp.array(False)])
-        return Conserved(values, scales, active)
+        # without gravity (|g| = 0, ĝ = 0) L·ĝ says nothing; a slot whose scale is zero (a
+        # body at rest with no weight) has nothing to restore
+        pulled = jnp.sum(self.g_hat * self.g_hat) > 0
+        active = jnp.stack([jnp.array(True), pulled, self.symmetric, jnp.array(False)])
+        return Conserved(values, scales, active & (scales > 0))
 
 
 class Scene(eqx.Module):
@@ -391,7 +394,7 @@ class Scene(eqx.Module):
         largest = jnp.max(jnp.diagonal(tensor))
         return TopConstants(
             tensor=tensor,
-            g_hat=g / g_norm,
+            g_hat=g / jnp.where(g_norm > 0, g_norm, 1.0),  # zero without gravity
             lever_weight=self.body.mass * g_norm * r,
             r_hat=r_hat,
             weight=weight,

@@ -259,7 +259,8 @@ class Trajectory(eqx.Module):
         return quat.to_euler(seq, self.q)
 
     def at(self, t) -> Trajectory:
-        """The trajectory at new times ``t (K,)`` from the dense interpolation.
+        """The trajectory at new times ``t (K,)`` from the dense interpolation (a scalar
+        ``t`` gives ``K = 1``: every field keeps its time axis).
 
         Needs ``simulate(..., dense=True)``. The solver statistics are carried over.
         For a batch of trajectories (``jax.vmap(simulate)``) call it under ``jax.vmap``

@@ -29,7 +29,7 @@ from jrigid import quaternion as quat
 from jrigid.body import RigidBody
 from jrigid.formulations import EulerAngles
 from jrigid.integrate import Result, SimulationError, simulate
-from jrigid.scene import FreeFlight, Scene
+from jrigid.scene import FreeFlight, Gravity, Pivot, Scene
 from jrigid.solve import PrecisionWarning
 from jrigid.state import State
 
@@ -379,6 +379,48 @@ def test_saveat_steps_passes_through():
     np.testing.assert_allclose(traj.omega[:n], exact.omega[1:], atol=1e-7)
     with pytest.raises(ValueError, match="custom fn"):
         simulate(scene, state, TS, saveat=diffrax.SaveAt(t1=True, fn=lambda t, y, a: y.q))
+
+
+def test_user_saveat_keeps_dense_and_reports_where_the_solve_stopped():
+    """With a user's SaveAt, ``dense=True`` keeps the interpolation (it was dropped, and
+    ``at`` asked for dense=True), and ``t_stop`` is the time the solve reached, not the
+    last output time: ts[-1] on success, the last step's end after a failure."""
+    scene, state = free_scene(), initial.from_omega(Q0, OMEGA0)
+    ts = jnp.linspace(0.0, 4.0, 5)
+    traj = simulate(scene, state, ts, saveat=diffrax.SaveAt(ts=jnp.array([1.0, 2.5])),
+                    dense=True)
+    assert float(traj.t_stop) == 4.0 and int(traj.result) == 0
+    exact = simulate(scene, state, jnp.array([0.0, 3.3]), solver="exact")
+    np.testing.assert_allclose(traj.at(3.3).omega[0], exact.omega[-1], atol=1e-7)
+    short = simulate(scene, state, ts, saveat=diffrax.SaveAt(ts=jnp.array([0.5, 1.0, 3.0])),
+                     max_steps=5, throw=False)
+    steps = simulate(scene, state, ts, saveat=diffrax.SaveAt(steps=True), max_steps=5,
+                     throw=False)
+    assert int(short.result) == int(Result.max_steps)
+    assert float(short.t_stop) == pytest.approx(float(np.nanmax(np.asarray(steps.ts))))
+    assert 0.5 < float(short.t_stop) < 1.0
+    with pytest.raises(ValueError, match="several SubSaveAt"):
+        simulate(scene, state, ts, saveat=diffrax.SaveAt(
+            subs=(diffrax.SubSaveAt(t0=True), diffrax.SubSaveAt(t1=True))))
+
+
+def test_a_pivot_without_gravity_is_a_torque_free_body():
+    """Gravity(0) on a Pivot: no direction of gravity to restore L·ĝ along (ĝ was 0/0, and
+    the projection turned every step into NaN), and a sweep over g that includes 0."""
+    body = RigidBody(jnp.array([1.0, 2.0, 2.5]), 2.0, jnp.array([0.0, 0.0, 0.5]))
+    state = initial.from_omega(jnp.array([0.9, 0.1, -0.3, 0.2]), jnp.array([0.3, 0.2, -1.0]))
+    ts = jnp.linspace(0.0, 1.0, 3)
+    scene = Scene(body, Pivot(), Gravity(0.0))
+    traj = simulate(scene, state, ts)
+    # the same body free, with its moments about the pivot (parallel axes: M |r|² = 0.5)
+    free = simulate(Scene(RigidBody(jnp.array([1.5, 2.5, 2.5]))), state, ts, solver="exact")
+    np.testing.assert_allclose(traj.omega, free.omega, atol=1e-8)
+    run = lambda g: simulate(Scene(body, Pivot(), Gravity(g)), state, ts,  # noqa: E731
+                             throw=False)
+    sweep = jax.vmap(run)(jnp.array([9.81, 0.0]))
+    assert np.all(np.asarray(sweep.result) == 0)
+    np.testing.assert_allclose(sweep.omega[1], free.omega, atol=1e-8)
+    np.testing.assert_allclose(sweep.omega[0], run(9.81).omega, atol=1e-10)
 
 
 def test_fixed_step_solvers_through_constant_step_size():
