@@ -200,7 +200,8 @@ def _project_top(top: TopConstants, targets: jax.Array, q: jax.Array, omega: jax
     third of the time of the same algebra written entry by entry."""
     g_body = quat.rotate_inverse(q, top.g_hat)
     here = top.conserved_at(g_body, omega)
-    weight = jnp.where(here.active, 1.0 / here.scales, 0.0).astype(omega.dtype)[:3]
+    weight = jnp.where(here.active, 1.0 / jnp.where(here.active, here.scales, 1.0),
+                       0.0).astype(omega.dtype)[:3]
     residual = (here.values[:3] - targets[:3]) * weight
     # L·r̂ is conserved only while the body is symmetric about its lever: its value is
     # restored, its derivative is not (see the module docstring)

@@ -423,6 +423,27 @@ def test_a_pivot_without_gravity_is_a_torque_free_body():
     np.testing.assert_allclose(sweep.omega[0], run(9.81).omega, atol=1e-10)
 
 
+@pytest.mark.parametrize("g, omega0, com", [
+    (9.81, (0.0, 0.0, 0.0), (0.0, 0.0, 0.5)),   # a pendulum released from rest
+    (0.0, (0.3, 0.2, -1.0), (0.0, 0.0, 0.5)),   # a pivot without gravity
+    (9.81, (0.3, 0.2, -1.0), (0.0, 0.0, 0.0)),  # pivoted at the centre of mass
+], ids=["from_rest", "no_gravity", "no_lever"])
+def test_top_gradients_are_finite_where_a_norm_is_zero(g, omega0, com):
+    """|L| at rest, |g| and |r| entered the projection through square roots, whose
+    derivative at zero is infinite: the gradient was NaN (a top released from rest)."""
+    state = initial.from_omega(jnp.array([0.9, 0.1, -0.3, 0.2]), jnp.array(omega0))
+
+    def loss(moments):
+        scene = Scene(RigidBody(moments, 2.0, jnp.array(com)), Pivot(), Gravity(g))
+        return jnp.sum(simulate(scene, state, jnp.linspace(0.0, 1.0, 3)).omega[-1] ** 2)
+
+    moments, direction, h = jnp.array([1.0, 2.0, 2.5]), jnp.array([0.3, -0.5, 0.8]), 1e-5
+    grad = jax.grad(loss)(moments)
+    central = (loss(moments + h * direction) - loss(moments - h * direction)) / (2 * h)
+    assert np.all(np.isfinite(np.asarray(grad)))
+    np.testing.assert_allclose(float(grad @ direction), float(central), rtol=1e-5, atol=1e-8)
+
+
 def test_fixed_step_solvers_through_constant_step_size():
     scene, state = free_scene(), initial.from_omega(Q0, OMEGA0)
     ts = jnp.linspace(0.0, 2.0, 5)
