@@ -351,9 +351,11 @@ class Scene(eqx.Module):
           that axis, where the energy and ``|L|²`` alone are nearly dependent;
         - a body on a pivot under gravity only (:attr:`conservative_top`): the total
           energy ``½ ω·I_p ω − M g·(R r)``, the momentum component along gravity
-          ``L_space·ĝ``, and — active only when the body is symmetric about the line
-          from the pivot to its centre of mass — the momentum component ``L·r̂`` along
-          that line (the Lagrange top's ``L₃``); the fourth slot is unused;
+          ``L_space·ĝ`` (active only when ``g ≠ 0``), and — active only when the body
+          is symmetric about the line from the pivot to its centre of mass — the
+          momentum component ``L·r̂`` along that line (the Lagrange top's ``L₃``); the
+          fourth slot is unused; a slot whose scale is zero (at rest, with no weight)
+          is not active;
         - anything else (a user torque, no load on a pivot): ``None``.
 
         Args:
