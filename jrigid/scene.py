@@ -235,6 +235,13 @@ class Conserved(NamedTuple):
     active: jax.Array
 
 
+def _length(square: jax.Array) -> jax.Array:
+    """``√square`` with a zero derivative, not an infinite one, at zero (``|L|`` of a top
+    at rest, ``|g|`` without gravity, ``|r|`` pivoted at the centre of mass)."""
+    positive = square > 0
+    return jnp.where(positive, jnp.sqrt(jnp.where(positive, square, 1.0)), 0.0)
+
+
 class TopConstants(eqx.Module):
     """What a conservative top's invariants (:meth:`Scene.conserved`) need of its scene.
 
@@ -273,9 +280,7 @@ class TopConstants(eqx.Module):
         L = jnp.sum(self.tensor * omega[None, :], axis=-1)
         kinetic = 0.5 * jnp.sum(omega * L)
         potential = -jnp.sum(g_body * self.lever_weight)  # −M g·(R r)
-        l2 = jnp.sum(L * L)  # |L|, with a zero (not NaN) derivative at rest
-        momentum = jnp.where(l2 > 0, jnp.sqrt(jnp.where(l2 > 0, l2, 1.0)), 0.0) \
-            + self.momentum_floor
+        momentum = _length(jnp.sum(L * L)) + self.momentum_floor
         values = jnp.stack([kinetic + potential, jnp.sum(L * g_body), jnp.sum(L * self.r_hat),
                             jnp.zeros((), dtype)])
         scales = jnp.stack([kinetic + self.weight, momentum, momentum, jnp.ones((), dtype)])
@@ -390,12 +395,11 @@ class Scene(eqx.Module):
         dtype = jnp.result_type(self.body.moments)
         tensor = self.inertia()
         g = sum((load.g for load in self.loads), jnp.zeros(3, dtype))
-        g_norm = linalg.safe_norm(g)  # (a zero gradient, not NaN, at g = 0 and r = 0)
+        g_norm = _length(linalg.dot(g, g))
         r = self.body.com
-        r_norm = linalg.safe_norm(r)
+        r_norm = _length(linalg.dot(r, r))
         r_hat = r / jnp.where(r_norm > 0, r_norm, 1.0)
         weight = self.body.mass * g_norm * r_norm
-        weight_safe = jnp.where(weight > 0, weight, 1.0)  # (no weight: a finite derivative)
         largest = jnp.max(jnp.diagonal(tensor))
         return TopConstants(
             tensor=tensor,
@@ -403,7 +407,7 @@ class Scene(eqx.Module):
             lever_weight=self.body.mass * g_norm * r,
             r_hat=r_hat,
             weight=weight,
-            momentum_floor=jnp.sqrt(largest * weight_safe) * (weight > 0),
+            momentum_floor=_length(largest * weight),
             pendulum2=weight / largest,
             symmetric=self.symmetric_about_lever(),
         )
