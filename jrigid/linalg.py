@@ -16,26 +16,11 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
+from jrigid._checks import check_shape
+
 __all__ = [
     "cross", "dot", "euler_diagonal", "matvec", "norm2", "rescale", "safe_norm", "solve3", "unit",
 ]
-
-
-def _vectors(where: str, *named) -> list[jax.Array]:
-    """The ``(name, array, length)`` arguments as arrays, each checked (statically, so at
-    no cost under ``jit``) to have a last axis of its ``length``; a ``length`` of
-    ``None`` takes the first argument's."""
-    arrays, first = [], None
-    for name, a, given in named:
-        a = jnp.asarray(a)
-        length = first if given is None else given
-        if a.ndim < 1 or (length is not None and a.shape[-1] != length):
-            want = "(..., n)" if length is None else f"(..., {length})"
-            why = f" to match {named[0][0]}" if given is None and first is not None else ""
-            raise ValueError(f"{where}: {name} must have shape {want}{why}, got {a.shape}")
-        first = a.shape[-1] if first is None else first
-        arrays.append(a)
-    return arrays
 
 
 def dot(a: jax.Array, b: jax.Array) -> jax.Array:
@@ -50,7 +35,10 @@ def dot(a: jax.Array, b: jax.Array) -> jax.Array:
     Raises:
         ValueError: last axes of different lengths.
     """
-    a, b = _vectors("dot", ("a", a, None), ("b", b, None))
+    a = jnp.asarray(a)
+    if a.ndim < 1:
+        raise ValueError(f"dot: a must have shape (..., n); got shape {a.shape}")
+    b = check_shape(b, "dot: b", a.shape[-1:], why=" to match a")
     total = a[..., 0] * b[..., 0]
     for i in range(1, a.shape[-1]):
         total = total + a[..., i] * b[..., i]
@@ -82,7 +70,7 @@ def cross(a: jax.Array, b: jax.Array) -> jax.Array:
     """``a × b`` of ``(..., 3)`` vectors (batch shapes broadcast), shape ``(..., 3)``.
 
     ``ValueError`` if a last axis is not of length 3."""
-    a, b = _vectors("cross", ("a", a, 3), ("b", b, 3))
+    a, b = check_shape(a, "cross: a", (3,)), check_shape(b, "cross: b", (3,))
     ax, ay, az = a[..., 0], a[..., 1], a[..., 2]
     bx, by, bz = b[..., 0], b[..., 1], b[..., 2]
     return jnp.stack([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx], axis=-1)
@@ -128,8 +116,8 @@ def matvec(m: jax.Array, v: jax.Array) -> jax.Array:
     ``ValueError`` if ``v``'s last axis is not ``m``'s."""
     m = jnp.asarray(m)
     if m.ndim < 2:
-        raise ValueError(f"matvec: m must have shape (..., n, k), got {m.shape}")
-    (v,) = _vectors("matvec", ("v", v, m.shape[-1]))
+        raise ValueError(f"matvec: m must have shape (..., n, k); got shape {m.shape}")
+    v = check_shape(v, "matvec: v", m.shape[-1:], why=" to match m")
     return jnp.stack([dot(m[..., i, :], v) for i in range(m.shape[-2])], axis=-1)
 
 
@@ -146,10 +134,7 @@ def solve3(m: jax.Array, b: jax.Array) -> jax.Array:
     Raises:
         ValueError: ``m`` not ``(..., 3, 3)`` or ``b`` not ``(..., 3)``.
     """
-    m = jnp.asarray(m)
-    if m.shape[-2:] != (3, 3):
-        raise ValueError(f"solve3: m must have shape (..., 3, 3), got {m.shape}")
-    (b,) = _vectors("solve3", ("b", b, 3))
+    m, b = check_shape(m, "solve3: m", (3, 3)), check_shape(b, "solve3: b", (3,))
     c0 = cross(m[..., :, 1], m[..., :, 2])
     c1 = cross(m[..., :, 2], m[..., :, 0])
     c2 = cross(m[..., :, 0], m[..., :, 1])

@@ -49,6 +49,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from jrigid._checks import check_number
 from jrigid.fit.problem import Problem
 from jrigid.fit.steps import (
     LMState,
@@ -274,9 +275,8 @@ def fit(
         raise ValueError(f"chi2_alpha must be in [0, 1), got {chi2_alpha!r}")
     if not edge_tol >= 0.0:
         raise ValueError(f"edge_tol must be >= 0, got {edge_tol!r}")
-    for name, value in (("gtol", gtol), ("ftol", ftol)):
-        if not value >= 0.0:  # (NaN too: a rule that can never be met)
-            raise ValueError(f"{name} must be a number >= 0, got {value!r}")
+    check_number("gtol", gtol, 0.0)  # (NaN too: a rule that can never be met)
+    check_number("ftol", ftol, 0.0)
     if rcond is not None and not 0.0 <= rcond < 1.0:
         raise ValueError(f"rcond must be in [0, 1) or None, got {rcond!r}")
     params = _checked_start(params0)

@@ -440,4 +440,4 @@ class AxisDirections(_PerSample):
         difference lies in the plane perpendicular to ``û``, and its χ² has two degrees
         of freedom, not three (the noise model: σ the same in the two directions across
         ``û``, in radians)."""
-        return 2 * int(np.sum(np.asarray(self.ts) <= np.asarray(t_end)))
+        return super().degrees(t_end) * 2 // 3
