@@ -240,7 +240,13 @@ def _cmd_run(p_run: argparse.ArgumentParser, args: argparse.Namespace, name: str
     problem = _unwritable(args.out if args.out is not None else _default_out(name))
     if problem:
         _fail(p_run, problem)
-    _run_one(name, args.out, args.quick, raw)
+    try:
+        _run_one(name, args.out, args.quick, raw)
+    except ValueError as e:  # a value the parser accepts but the experiment's physics not
+        if not raw:
+            raise
+        given = ", ".join(f"{k}={v}" for k, v in raw.items())
+        _fail(p_run, f"experiment {name!r} refused its parameters ({given}): {e}")
     return 0
 
 

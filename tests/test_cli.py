@@ -145,6 +145,15 @@ def test_non_positive_mass_exits_2(argv, key, capsys, tmp_path):
     assert len(err.strip().splitlines()) == 1
 
 
+def test_a_value_the_experiment_refuses_exits_2_with_one_line(capsys, tmp_path):
+    """A parameter that parses but that the physics refuses (a negative thickness) used
+    to end in a traceback naming an internal variable."""
+    code, err = _exit_code(["run", "body_frame", "sides=1,-2,3", "--quick", "--out",
+                            str(tmp_path)], capsys)
+    assert code == 2 and "refused its parameters (sides=1,-2,3)" in err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+
+
 def test_parameters_declared_positive_are_refused_unless_positive(tmp_path, monkeypatch):
     folder = tmp_path / "declared"
     folder.mkdir()
