@@ -17,6 +17,7 @@ from jax.typing import ArrayLike
 
 from jrigid import exact, initial
 from jrigid import quaternion as quat
+from jrigid._checks import is_traced
 from jrigid.body import RigidBody
 from jrigid.integrate import simulate
 from jrigid.scene import Scene
@@ -50,6 +51,8 @@ def ftle_exact(moments: ArrayLike, omega0: ArrayLike, t: ArrayLike) -> jax.Array
     """
     moments, omega0 = jnp.asarray(moments), jnp.asarray(omega0)
     t = jnp.asarray(t, dtype=omega0.dtype)
+    if not is_traced(t) and not (t.shape == () and bool(jnp.isfinite(t) & (t > 0))):
+        raise ValueError(f"t must be a finite horizon > 0, got {t}")
     q0 = quat.identity(dtype=omega0.dtype)
     # Tie the moments to the traced ω0, so exact.prepare sees a tracer (not a concrete
     # array captured by jit) and skips its concrete-value check.

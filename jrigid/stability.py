@@ -49,6 +49,7 @@ import math
 import diffrax
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax.typing import ArrayLike
 
 from jrigid import initial
@@ -97,8 +98,9 @@ def fibonacci_sphere(n: int, dtype=None) -> jax.Array:
     Returns:
         ``(n, 3)`` unit vectors.
     """
-    if not isinstance(n, int) or n < 1:
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
         raise ValueError(f"fibonacci_sphere needs a positive int n, got {n!r}")
+    n = int(n)
     dtype = jnp.result_type(float) if dtype is None else dtype
     i = jnp.arange(n, dtype=dtype)
     z = 1.0 - (2.0 * i + 1.0) / n

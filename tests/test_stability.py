@@ -57,6 +57,19 @@ def test_fibonacci_directions_are_unit_and_uniform():
     assert np.linalg.norm(d.mean(axis=0)) < 1e-3
     with pytest.raises(ValueError, match="positive int"):
         stability.fibonacci_sphere(0)
+    with pytest.raises(ValueError, match="positive int"):
+        stability.fibonacci_sphere(True)  # a bool is not a count
+    np.testing.assert_array_equal(stability.fibonacci_sphere(np.int64(5)),
+                                  stability.fibonacci_sphere(5))
+
+
+@pytest.mark.parametrize("t", [0.0, -5.0, float("nan")])
+def test_ftle_exact_refuses_a_horizon_that_is_not_positive(t):
+    """t = 0 gave NaN, and t < 0 a negative exponent that read as stable."""
+    from jrigid.ftle import ftle_exact
+
+    with pytest.raises(ValueError, match="horizon > 0"):
+        ftle_exact(jnp.array([1.0, 2.0, 3.0]), jnp.array([0.1, 1.0, 0.1]), t)
 
 
 def test_omega_at_energy_has_the_energy_and_direction():

@@ -111,6 +111,16 @@ def test_failed_member_does_not_take_its_group_with_it(tmp_path):
     assert info["shared_step"] and info["failed"] == 1 and info["first_failed"] == 2
     assert info["solved_again"] == 4 and (tmp_path / "per_member" / "chunk_00000.npz").exists()
     assert shared["result"].tolist() == [0, 0, Result.max_steps, 0]
+    # the chunk file holds what the call returned (it held the group's failure), and a
+    # resumed run returns the same
+    with np.load(tmp_path / "chunk_00000.npz") as stored:
+        for k in shared:
+            np.testing.assert_array_equal(stored[k], shared[k])
+    with pytest.warns(ensemble.SweepWarning):
+        again = ensemble.simulate_many(SCENE, states, TS, info=info, out_dir=tmp_path, **kwargs)
+    assert info["chunks_loaded"] == 1
+    for k in shared:
+        np.testing.assert_array_equal(again[k], shared[k])
     with pytest.warns(ensemble.SweepWarning):
         per_member = ensemble.simulate_many(SCENE, states, TS, shared_step=False, **kwargs)
     slow = [0, 1, 3]
@@ -163,3 +173,68 @@ def test_output_times_not_increasing_are_refused_up_front(ts):
     one member alone)."""
     with pytest.raises(ValueError, match="strictly increasing"):
         ensemble.simulate_many(SCENE, states_of(np.eye(3)), ts, progress=False)
+
+
+@pytest.mark.parametrize("option, message", [
+    (dict(rtol=-1.0), "rtol must be finite"), (dict(rtol=1e-30), "below 10 machine"),
+    (dict(atol=-1.0), "atol must be finite"), (dict(dt0=-0.1), "dt0 must be finite and > 0"),
+])
+def test_settings_every_member_shares_are_refused_up_front(option, message):
+    """A bad tolerance made every member invalid (N warnings' worth, after the whole
+    sweep), and a negative dt0 ended in an internal runtime error."""
+    with pytest.raises(ValueError, match=message):
+        ensemble.simulate_many(SCENE, states_of(np.eye(3)), TS, progress=False, **option)
+
+
+def test_a_scene_with_a_member_axis_is_refused_with_the_remedy():
+    moments = jnp.asarray([[1.0, 2.0, 3.0], [1.0, 2.0, 2.5], [2.0, 2.0, 3.0]])
+    scenes = jax.vmap(lambda m: Scene(RigidBody(m)))(moments)
+    states = states_of(np.eye(3))
+    with pytest.raises(ValueError, match="member axis.*function params -> Scene"):
+        ensemble.simulate_many(scenes, states, TS, progress=False)
+    with pytest.raises(ValueError, match="scene has a batch axis"):
+        simulate(scenes, jax.tree_util.tree_map(lambda a: a[0], states), TS)
+    with pytest.raises(ValueError, match="pass batched_scene=True"):
+        ensemble.simulate_lockstep(scenes, states, TS)
+    with pytest.raises(ValueError, match="batched_scene=True but"):
+        ensemble.simulate_lockstep(SCENE, states, TS, batched_scene=True)
+    with pytest.raises(ValueError, match="no members"):
+        ensemble.simulate_lockstep(SCENE, states_of(np.zeros((0, 3))), TS)
+    # and the scene function built from the same moments runs, member for member
+    traj = ensemble.simulate_lockstep(scenes, states, TS, batched_scene=True)
+    for k in range(3):
+        one = simulate(Scene(RigidBody(moments[k])), initial.from_omega(None, np.eye(3)[k]), TS,
+                       formulation="quaternion_acceleration")
+        np.testing.assert_allclose(traj.omega[k], one.omega, atol=1e-7)
+
+
+def test_resuming_with_another_scene_function_or_summary_is_refused(tmp_path):
+    """Two lambdas have the same name: the second run returned the first one's numbers."""
+    params = jnp.asarray([[1.0, 2.0, 3.0], [1.0, 2.0, 2.5]])
+    states = states_of(np.eye(3)[:2])
+    kwargs = dict(params=params, out_dir=tmp_path, progress=False)
+    first = ensemble.simulate_many(lambda p: Scene(RigidBody(p)), states, TS, **kwargs)
+    with pytest.raises(ValueError, match="different run"):
+        ensemble.simulate_many(lambda p: Scene(RigidBody(2.0 * p)), states, TS, **kwargs)
+    with pytest.raises(ValueError, match="different run"):
+        ensemble.simulate_many(lambda p: Scene(RigidBody(p)), states, TS,
+                               summary=lambda t: {"omega": t.omega[0]}, **kwargs)
+    same = ensemble.simulate_many(lambda p: Scene(RigidBody(p)), states, TS, **kwargs)
+    np.testing.assert_array_equal(same["omega"], first["omega"])
+
+
+def test_an_ensemble_run_under_a_transformation_names_the_remedy():
+    def loss(omegas):
+        return ensemble.simulate_many(SCENE, states_of(omegas), TS, progress=False)["omega"].sum()
+
+    with pytest.raises(ValueError, match="is traced.*simulate_lockstep"):
+        jax.grad(loss)(jnp.eye(3))
+
+
+def test_an_out_dir_that_cannot_be_created_is_a_value_error(tmp_path):
+    """It was the operating system's NotADirectoryError."""
+    a_file = tmp_path / "a_file"
+    a_file.write_text("x")
+    with pytest.raises(ValueError, match="cannot be created"):
+        ensemble.simulate_many(SCENE, states_of(np.eye(3)), TS, progress=False,
+                               out_dir=a_file / "below")

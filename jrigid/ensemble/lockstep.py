@@ -42,7 +42,7 @@ from jax.typing import ArrayLike
 from jrigid.formulations import AbstractFormulation, check_scene, get_formulation
 from jrigid.invariants import Invariants
 from jrigid.scene import Scene
-from jrigid.solve.inputs import input_checks, normalised, prepare, screen
+from jrigid.solve.inputs import input_checks, normalised, prepare, screen, validate_shared
 from jrigid.solve.outcome import finish, raise_on_failure
 from jrigid.solve.stepping import (
     controller,
@@ -220,13 +220,26 @@ def simulate_lockstep(
             "initial_states must have one leading member axis on every array (q (N, 4), "
             f"qdot (N, 4), ...), got shapes {jax.tree_util.tree_map(jnp.shape, initial_states)}"
         )
+    if leading == {0}:
+        raise ValueError("initial_states has no members (a leading axis of length 0)")
+    scene_axis = 0 if batched_scene else None
+    scene_lead = jnp.shape(scene.body.moments)[:-1]
+    if scene_lead != ((len(initial_states.q),) if batched_scene else ()):
+        raise ValueError(
+            f"batched_scene={batched_scene} but the scene's body.moments has shape "
+            f"{jnp.shape(scene.body.moments)} for {len(initial_states.q)} members: "
+            + ("a batched scene has a leading member axis on every array (e.g. "
+               "jax.vmap(make_scene)(params))" if batched_scene
+               else "pass batched_scene=True for a scene with a leading member axis")
+        )
     solver, adjoint, dt0, max_steps = solver_options(solver, adjoint, max_steps, dt0)
     dtype = jnp.result_type(float)
     states, ts, rtol, atol = jax.vmap(
-        lambda s: prepare(scene, s, ts, rtol, atol, dtype), out_axes=(0, None, None, None)
-    )(initial_states)
+        lambda sc, s: prepare(sc, s, ts, rtol, atol, dtype), in_axes=(scene_axis, 0),
+        out_axes=(0, None, None, None)
+    )(scene, initial_states)
+    validate_shared(ts, rtol, atol, dtype)  # every member's: not blamed on one
     check_scene(formulation, scene)
-    scene_axis = 0 if batched_scene else None
     project = bool(project) and formulation.carries_quaternion
     traj, cause, messages = _solve(scene, states, ts, rtol, atol, dt0, formulation, solver,
                                    adjoint, max_steps, project, scene_axis)

@@ -15,7 +15,10 @@ first (a :class:`SweepWarning` and ``info``).
 from __future__ import annotations
 
 import concurrent.futures as cf
+import hashlib
+import inspect
 import os
+import pathlib
 import re
 import warnings
 from collections.abc import Callable, Sequence
@@ -25,11 +28,13 @@ import jax
 import numpy as np
 from jax.typing import ArrayLike
 
+from jrigid.ensemble import storage
 from jrigid.ensemble.lockstep import simulate_lockstep
 from jrigid.ensemble.runner import run
 from jrigid.formulations import get_formulation
 from jrigid.integrate import simulate
 from jrigid.scene import Scene
+from jrigid.solve import check_dt0, validate_shared
 from jrigid.state import State
 from jrigid.trajectory import Result, Trajectory
 
@@ -124,8 +129,10 @@ def simulate_many(
             second program, compiled only then; with ``out_dir`` stored in
             ``out_dir/per_member``), so the others are unaffected by it. ``False``: every
             member has its own adaptive step (``jax.vmap(simulate)``), and its results
-            depend on its own inputs only (not on the chunk, padding, devices or worker;
-            bit for bit).
+            depend on its own inputs only: bit for bit, whatever its chunk, padding,
+            thread or worker, for one batch size (``chunk_size`` ÷ devices); to rounding
+            (about 1e-14 in float64) between batch sizes, which XLA vectorises
+            differently.
         **simulate_kwargs: passed to :func:`jrigid.simulate` (``solver``, ``rtol``,
             ``formulation``, ...), with :data:`SWEEP_DEFAULTS` (``formulation=
             "quaternion_omega"``) where not given. ``throw`` defaults to ``False`` here:
@@ -166,11 +173,18 @@ def simulate_many(
     else:
         raise ValueError(f"scene must be a Scene or a function returning one, got {scene!r}")
     ts = np.asarray(ts, dtype=jax.dtypes.canonicalize_dtype(np.float64))
-    if ts.ndim != 1 or ts.shape[0] < 2 or not np.all(np.isfinite(ts)):
-        raise ValueError(f"ts must be a finite 1-D array of at least 2 times, got {ts!r}")
-    if np.any(np.diff(ts) <= 0):  # shared by every member: not one member's problem
-        raise ValueError(f"ts must be strictly increasing, got {ts!r}")
+    if ts.ndim != 1 or ts.shape[0] < 2:
+        raise ValueError(f"ts must be a 1-D array of at least 2 times, got {ts!r}")
     kwargs = {"throw": False, **SWEEP_DEFAULTS, **simulate_kwargs}
+    # Settings every member shares are traced in the sweep: checked here, once, so that a
+    # bad one is an error and not N invalid members.
+    validate_shared(ts, kwargs.get("rtol"), kwargs.get("atol"), ts.dtype)
+    check_dt0(kwargs.get("dt0"))
+    if isinstance(scene, Scene) and np.shape(scene.body.moments) != (3,):
+        raise ValueError(
+            f"scene has a member axis (body.moments has shape {np.shape(scene.body.moments)}):"
+            " pass a function params -> Scene and its per-member params instead"
+        )
     lockstep = _use_lockstep(shared_step, kwargs)
     # Arrays common to all members are traced (changing them does not recompile).
     shared = {"ts": ts}
@@ -190,7 +204,8 @@ def simulate_many(
     meta = dict(metadata or {})
     meta["simulate"] = {
         "kwargs": {k: _describe(v) for k, v in member.kwargs},
-        "summary": getattr(member.summary, "__qualname__", _describe(member.summary)),
+        "summary": _code_identity(member.summary),
+        "scene": None if fixed else _code_identity(scene),
         "shared_step": member.lockstep,
     }
     # What both runs (the sweep and the failed groups solved again) share.
@@ -222,6 +237,8 @@ def simulate_many(
         )
         for k in out:
             out[k][regrouped] = again[k]
+        if out_dir is not None:
+            _rewrite_chunks(out_dir, out, regrouped, order, stats["chunk_size"])
     stats.update(_tally(out["result"]), shared_step=member.lockstep,
                  solved_again=int(regrouped.size))
     if info is not None:
@@ -278,6 +295,46 @@ def _sweep_message(stats: dict[str, Any], codes: np.ndarray) -> str:
 def _describe(value) -> str:
     """``repr`` without memory addresses (stable across sessions, for ``meta.json``)."""
     return re.sub(r" at 0x[0-9a-fA-F]+", "", repr(value))
+
+
+def _code_identity(fn: Callable) -> dict[str, str]:
+    """What tells a function apart in ``meta.json``, across sessions: its qualified name,
+    and a SHA-256 of its bytecode (constants and names included; not where it stands in
+    its file) and of the values its closure holds. Two lambdas, or one function edited,
+    differ; the globals and functions it reads are not included. (A new Python version
+    compiles other bytecode: a run stored with another one is not resumed.)"""
+    name = f"{getattr(fn, '__module__', '?')}.{getattr(fn, '__qualname__', type(fn).__name__)}"
+    code = getattr(fn, "__code__", None)
+    text = _describe(fn) if code is None else _bytecode(code)
+    cells = [_describe(c.cell_contents) for c in getattr(fn, "__closure__", None) or ()]
+    digest = hashlib.sha256("\n".join([text, *cells]).encode()).hexdigest()
+    return {"name": name, "sha256": digest}
+
+
+def _bytecode(code) -> str:
+    """A code object's instructions, names and constants (nested code objects alike)."""
+    consts = [_bytecode(c) if inspect.iscode(c) else repr(c) for c in code.co_consts]
+    return "|".join([code.co_code.hex(), repr(code.co_names), *consts])
+
+
+def _rewrite_chunks(out_dir, out: dict[str, np.ndarray], regrouped: np.ndarray, order,
+                    chunk_size: int) -> None:
+    """Store the outputs of the members solved again in the chunk files that hold them,
+    so that ``out_dir`` holds what :func:`simulate_many` returns (and a resumed run finds
+    those groups solved)."""
+    if jax.process_index() != 0:
+        return
+    path = pathlib.Path(out_dir)
+    n = out["result"].shape[0]
+    perm = np.arange(n) if order is None else np.asarray(order)
+    position = np.empty(n, dtype=int)
+    position[perm] = np.arange(n)
+    with storage.lock(path):
+        run_id = storage.run_id(storage.read_meta(path))
+        for index in np.unique(position[regrouped] // chunk_size):
+            members = perm[index * chunk_size:(index + 1) * chunk_size]
+            storage.write_chunk(path, int(index), {k: v[members] for k, v in out.items()},
+                                run_id)
 
 
 def _failed(codes: np.ndarray) -> np.ndarray:

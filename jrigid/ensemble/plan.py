@@ -92,6 +92,12 @@ def named_leaves(tree, what: str = "inputs") -> tuple[list[tuple[str, np.ndarray
     out = []
     for path, leaf in path_leaves:
         name = jax.tree_util.keystr(path)
+        if isinstance(leaf, jax.core.Tracer):
+            raise ValueError(
+                f"{what}{name} is traced (inside jax.grad, jit or vmap): an ensemble run "
+                "computes chunk by chunk on concrete arrays and cannot be transformed; "
+                "for derivatives use jrigid.ensemble.simulate_lockstep or "
+                "jax.vmap(jrigid.simulate)")
         try:
             a = np.asarray(leaf)
         except Exception as err:  # noqa: BLE001
@@ -205,8 +211,10 @@ def plan(
             ``check_finite``), a bad ``chunk_size``/``metadata``/``order``, or ``fn`` not
             returning a dict of arrays.
     """
-    if isinstance(chunk_size, bool) or not isinstance(chunk_size, int) or chunk_size < 1:
+    if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) \
+            or chunk_size < 1:
         raise ValueError(f"chunk_size must be a positive int, got {chunk_size!r}")
+    chunk_size = int(chunk_size)
     if not callable(fn):
         raise ValueError(f"fn must be callable, got {type(fn).__name__}")
     named, treedef = named_leaves(inputs)

@@ -17,10 +17,12 @@ fixed chunk shape, in three steps:
    ``out_dir/chunk_00000.npz``, ... as it finishes, under one progress bar.
 
 Members are computed independently: a member's outputs do not depend on the chunk,
-the padding, the number of devices or the worker it was computed with (bit for bit;
-tested). The exception is ``batched=True``, for functions that couple the members of a
-group on purpose (:func:`~jrigid.ensemble.simulate_lockstep`): there each device's share
-of a chunk is one group.
+the padding, the thread or the worker it was computed with (bit for bit; tested), for
+one number of members per compiled call (``info["batch"]`` ÷ devices); between
+different batch sizes, which XLA vectorises differently, to rounding. The exception is
+``batched=True``, for functions that couple the members of a group on purpose
+(:func:`~jrigid.ensemble.simulate_lockstep`): there each device's share of a chunk is
+one group.
 
 Errors: bad inputs, a ``fn`` that does not return a dict of arrays and an ``out_dir``
 holding a different run raise ``ValueError`` before anything is computed. An error
@@ -268,7 +270,10 @@ def _locked(path: pathlib.Path | None, writer: bool) -> contextlib.AbstractConte
         return contextlib.nullcontext()
     if path.exists() and not path.is_dir():
         raise ValueError(f"out_dir {path} exists and is not a folder")
-    path.mkdir(parents=True, exist_ok=True)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise ValueError(f"out_dir {path} cannot be created: {err.strerror or err}") from None
     return storage.lock(path)
 
 
@@ -296,8 +301,9 @@ def _dispatch(p: Plan, todo, results, path, progress, writer, executor, devs, sp
     if show and writer:
         from tqdm.auto import tqdm
 
-        bar = tqdm(total=p.n, desc="ensemble", unit="member", leave=False)
-        bar.update(p.n - sum(p.members(i)[1] for i in todo))
+        # left on screen (and in a log) at its end; a resumed run starts at what it loaded
+        bar = tqdm(total=p.n, initial=p.n - sum(p.members(i)[1] for i in todo),
+                   desc="ensemble", unit="member")
 
     def finish(i: int, chunk: dict[str, np.ndarray]) -> None:
         if path is not None and executor is None:

@@ -12,7 +12,10 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax.typing import ArrayLike
+
+from jrigid._checks import is_traced
 
 __all__ = ["difficulty_order", "lockstep_efficiency"]
 
@@ -46,8 +49,19 @@ def lockstep_efficiency(
         1.0
     """
     s = jnp.asarray(steps, dtype=jnp.result_type(float))
+    if s.ndim != 1:
+        raise ValueError(f"steps must be (N,), got shape {s.shape}")
+    if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) \
+            or chunk_size < 1:
+        raise ValueError(f"chunk_size must be a positive int, got {chunk_size!r}")
+    chunk_size = int(chunk_size)
     if order is not None:
-        s = s[jnp.asarray(order)]
+        order = jnp.asarray(order)
+        if not is_traced(order) and (order.shape != s.shape or not np.array_equal(
+                np.sort(np.asarray(order)), np.arange(s.shape[0]))):
+            raise ValueError(f"order must be a permutation of range({s.shape[0]}), got "
+                             f"{np.asarray(order)!r}")
+        s = s[order]
     n = s.shape[0]
     n_chunks = -(-n // chunk_size)
     pad = n_chunks * chunk_size - n
@@ -73,4 +87,8 @@ def difficulty_order(difficulty: ArrayLike) -> jax.Array:
     Returns:
         ``(N,)`` int permutation, easiest first.
     """
-    return jnp.argsort(jnp.asarray(difficulty), stable=True)
+    difficulty = jnp.asarray(difficulty)
+    if difficulty.ndim != 1:
+        raise ValueError(f"difficulty must be (N,), one number per member, got shape "
+                         f"{difficulty.shape}")
+    return jnp.argsort(difficulty, stable=True)

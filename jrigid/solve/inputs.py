@@ -37,7 +37,9 @@ __all__ = [
     "precision_problem",
     "prepare",
     "screen",
+    "shared_checks",
     "validate",
+    "validate_shared",
     "warn_precision",
 ]
 
@@ -102,6 +104,13 @@ def prepare(scene: Scene, state: State, ts, rtol, atol, dtype):
         raise ValueError(
             f"initial_state must be a jrigid State (see jrigid.initial), got {type(state).__name__}"
         )
+    moments_shape = jnp.shape(scene.body.moments)
+    if moments_shape != (3,):
+        raise ValueError(
+            f"scene has a batch axis (body.moments has shape {moments_shape}): a solve takes "
+            "one scene; for many, jax.vmap over the scenes, or jrigid.ensemble.simulate_many "
+            "with a function params -> Scene"
+        )
     q, qdot, x, v = state.q, state.qdot, state.x, state.v  # (module fields: slow to read)
     translates = scene.translates
     if translates and (x is None or v is None):
@@ -128,19 +137,12 @@ def prepare(scene: Scene, state: State, ts, rtol, atol, dtype):
 TOLERANCE_CHECKS = (0, 1, 2)
 
 
-def input_checks(formulation, scene, state: State, ts, rtol, atol) -> list[tuple[jax.Array, str]]:
-    """``[(bad, message), ...]``: every value check of a solve's inputs, in report order.
-
-    The ``bad`` flags are ``()`` boolean arrays (traced under ``jit``/``vmap``): the
-    tolerances, the output times, the initial state (finite, a nonzero quaternion), the
-    body (:meth:`jrigid.body.RigidBody.problems`) and the formulation's domain (e.g.
-    gimbal lock of Euler angles).
-    """
+def shared_checks(ts, rtol, atol) -> list[tuple[jax.Array, str]]:
+    """The first entries of :func:`input_checks`: the tolerances ``rtol``, ``atol`` (``()``
+    arrays) and the output times ``ts (T,)``, which the members of a batch share."""
     eps = jnp.finfo(rtol.dtype).eps
     name = jnp.dtype(rtol.dtype).name
-    finite = lambda a: jnp.all(jnp.isfinite(a))  # noqa: E731
-    n = quat.norm(state.q)  # scale-safe: |q| = 1e-300 or 1e300 is a valid orientation
-    out = [
+    return [
         (~jnp.isfinite(rtol) | (rtol <= 0) | (rtol >= 1),
          "rtol must be finite, > 0 and < 1 (a relative error of 1 or more controls nothing)"),
         (
@@ -150,8 +152,39 @@ def input_checks(formulation, scene, state: State, ts, rtol, atol) -> list[tuple
             + (" (or enable float64)" if jnp.finfo(rtol.dtype).bits < 64 else ""),
         ),
         (~jnp.isfinite(atol) | (atol < 0), "atol must be finite and >= 0"),
-        (~finite(ts), "ts has non-finite entries"),
+        (~jnp.all(jnp.isfinite(ts)), "ts has non-finite entries"),
         (jnp.any(jnp.diff(ts) <= 0), "ts must be strictly increasing"),
+    ]
+
+
+def validate_shared(ts, rtol, atol, dtype) -> None:
+    """``ValueError`` (:func:`input_checks`' message) for concrete output times ``ts
+    (T,)`` or tolerances (``None``: the default) that no solve in ``dtype`` can run with:
+    for the settings of a batch (a sweep), checked once, before they are traced, and
+    not blamed on one member."""
+    rtol = _default_array(dtype, 0) if rtol is None else _as(rtol, dtype, "rtol", ())
+    atol = _default_array(dtype, 1) if atol is None else _as(atol, dtype, "atol", ())
+    ts = _converted(ts, dtype, "ts")
+    if is_traced((ts, rtol, atol)):
+        return
+    checks = shared_checks(np.asarray(ts), np.asarray(rtol), np.asarray(atol))
+    for index, (bad, _) in enumerate(checks):
+        if bool(bad):
+            raise ValueError(message(checks, index, rtol, atol))
+
+
+def input_checks(formulation, scene, state: State, ts, rtol, atol) -> list[tuple[jax.Array, str]]:
+    """``[(bad, message), ...]``: every value check of a solve's inputs, in report order.
+
+    The ``bad`` flags are ``()`` boolean arrays (traced under ``jit``/``vmap``): the
+    tolerances, the output times, the initial state (finite, a nonzero quaternion), the
+    body (:meth:`jrigid.body.RigidBody.problems`) and the formulation's domain (e.g.
+    gimbal lock of Euler angles).
+    """
+    finite = lambda a: jnp.all(jnp.isfinite(a))  # noqa: E731
+    n = quat.norm(state.q)  # scale-safe: |q| = 1e-300 or 1e300 is a valid orientation
+    out = [
+        *shared_checks(ts, rtol, atol),
         (~finite(state.q), "initial_state.q has non-finite entries (NaN or inf)"),
         (
             ~(n > 0) & finite(state.q),

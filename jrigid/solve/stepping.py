@@ -30,6 +30,7 @@ __all__ = [
     "UnitTimeTerm",
     "VectorPIDController",
     "WrappedSolver",
+    "check_dt0",
     "controller",
     "interpolating_at",
     "projected",
@@ -227,13 +228,20 @@ def solver_options(solver, adjoint, max_steps, dt0, default=None):
         or max_steps < 1
     ):
         raise ValueError(f"max_steps must be a positive int, got {max_steps!r}")
-    if dt0 is not None:
-        dt0 = jnp.asarray(dt0, dtype=jnp.result_type(float))
-        if dt0.shape != ():
-            raise ValueError(f"dt0 must be a scalar, got shape {dt0.shape}")
-        if not is_traced(dt0) and not bool(jnp.isfinite(dt0) & (dt0 > 0)):
-            raise ValueError(f"dt0 must be finite and > 0, got {dt0}")
-    return solver, adjoint, dt0, int(max_steps)
+    return solver, adjoint, check_dt0(dt0), int(max_steps)
+
+
+def check_dt0(dt0):
+    """``dt0`` as a ``()`` float array (``None`` stays ``None``); ``ValueError`` if it is
+    not a scalar, or concrete and not finite and positive."""
+    if dt0 is None:
+        return None
+    dt0 = jnp.asarray(dt0, dtype=jnp.result_type(float))
+    if dt0.shape != ():
+        raise ValueError(f"dt0 must be a scalar, got shape {dt0.shape}")
+    if not is_traced(dt0) and not bool(jnp.isfinite(dt0) & (dt0 > 0)):
+        raise ValueError(f"dt0 must be finite and > 0, got {dt0}")
+    return dt0
 
 
 class VectorPIDController(diffrax.PIDController):
