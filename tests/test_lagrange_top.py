@@ -787,3 +787,58 @@ def test_square_root_forms_of_carlson_integrals():
     d = jax.grad(lambda c: special.elliprf_sqrt(c, 0.5, 1.0))(0.0)
     # R_F(c², y, z) = R_F(0, y, z) − c/√(yz) + O(c²)
     assert float(d) == pytest.approx(-1.0 / math.sqrt(0.25), rel=1e-12)
+
+
+def _top_motion(moments, g, com, omega0):
+    ts = jnp.array([0.3, 2.7])
+    q, w = lagrange_top.solve(moments, 1.0, com, g, jnp.array([0.98, 0.2, 0.0, 0.0]), omega0, ts)
+    return jnp.concatenate([q.ravel(), w.ravel()])
+
+
+def test_derivatives_where_the_closed_form_is_not_smooth_are_nan_not_zero():
+    """Without gravity the derivative in g came out exactly 0 (the motion's is 0.62), and
+    with the pivot at the centre of mass the one in l was 5 % off: NaN now. The other
+    derivatives there stay finite and right (against the numerical solve)."""
+    moments, w0 = jnp.array([1.0, 1.0, 0.5]), jnp.array([0.3, -0.2, 5.0])
+    lever, g = jnp.array([0.0, 0.0, 1.0]), jnp.array([0.0, 0.0, -9.81])
+    d_g = jax.jacfwd(_top_motion, argnums=1)(moments, jnp.zeros(3), lever, w0)
+    d_l = jax.jacrev(_top_motion, argnums=2)(moments, g, jnp.zeros(3), w0)
+    spin = np.array([10, 13])  # ω3 at the two times: conserved, its derivative 0 is right
+    others = np.setdiff1d(np.arange(14), spin)
+    assert np.all(np.isnan(d_g[others])) and np.all(np.isnan(d_l[others, 2]))
+    assert np.all(d_g[spin] == 0.0)
+    d_m = jax.jacfwd(_top_motion, argnums=0)(moments, jnp.zeros(3), lever, w0)
+    assert np.all(np.isfinite(d_m))
+    h = 1e-6
+    bump = jnp.array([h, h, 0.0])  # within the family of symmetric tops
+    fd = (_top_motion(moments + bump, jnp.zeros(3), lever, w0)
+          - _top_motion(moments - bump, jnp.zeros(3), lever, w0)) / (2 * h)
+    np.testing.assert_allclose(d_m @ jnp.array([1.0, 1.0, 0.0]), fd, atol=1e-7)
+    # away from those points the derivatives in g and l are finite
+    assert np.all(np.isfinite(jax.jacfwd(_top_motion, argnums=1)(moments, g, lever, w0)))
+
+
+def test_a_sleeping_top_has_finite_derivatives_in_both_modes():
+    """Forward mode gave NaN (a square root at zero), reverse mode zero."""
+    args = (jnp.array([1.0, 1.0, 0.5]), jnp.array([0.0, 0.0, -9.81]), jnp.array([0.0, 0.0, 1.0]))
+    w0 = jnp.array([0.0, 0.0, 30.0])
+
+    def motion(w):
+        q, w_t = lagrange_top.solve(args[0], 1.0, args[2], args[1], jnp.array([1.0, 0, 0, 0]), w,
+                                    jnp.array([0.3, 2.7]))
+        return jnp.concatenate([q.ravel(), w_t.ravel()])
+
+    fwd, rev = jax.jacfwd(motion)(w0), jax.jacrev(motion)(w0)
+    assert np.all(np.isfinite(fwd))
+    np.testing.assert_allclose(fwd, rev, atol=1e-12)
+
+
+@pytest.mark.parametrize("which", ["g", "com", "omega0"])
+def test_non_finite_gravity_or_state_is_refused_not_read_as_none(which):
+    """NaN gravity gave exactly the motion without gravity."""
+    values = dict(g=jnp.array([0.0, 0.0, -9.81]), com=jnp.array([0.0, 0.0, 1.0]),
+                  omega0=jnp.array([0.3, -0.2, 5.0]))
+    values[which] = values[which].at[2].set(jnp.nan)
+    with pytest.raises(ValueError, match=f"{which} has non-finite entries"):
+        lagrange_top.solve(jnp.array([1.0, 1.0, 0.5]), 1.0, values["com"], values["g"],
+                           jnp.array([1.0, 0, 0, 0]), values["omega0"], jnp.array([0.5]))

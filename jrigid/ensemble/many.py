@@ -111,8 +111,9 @@ def simulate_many(
             ``meta.json``); the other ``simulate_kwargs``, ``shared_step`` and the
             summary's and scene function's names and code (bytecode and closure values;
             not the globals or other functions they read) are stored in the metadata,
-            so resuming with other settings is refused. Pass the same ``summary`` function object (not a new lambda) to
-            reuse the compiled program between calls. ``info`` also receives
+            so resuming with other settings is refused. Pass the same ``summary``
+            function object (not a new lambda) to reuse the compiled program between
+            calls. ``info`` also receives
             ``invalid_input``/``first_invalid`` and ``failed``/``first_failed`` (member
             counts and the first member's index, or ``None``), ``shared_step`` and
             ``solved_again`` (members of failed groups solved again per member).

@@ -75,10 +75,14 @@ the family of symmetric tops: the transverse moment is ``(I1 + I2)/2``, so ``∂
 is exact); ``com_x, com_y`` do not enter (an off-axis centre of mass is not a Lagrange
 top). At instants where the axis is exactly vertical or exactly hanging (always, for a
 sleeping top) the derivatives are finite but miss the first-order tilt, whose size is not
-a differentiable function of the state there.
+a differentiable function of the state there. Without gravity (``g = 0``) the derivatives
+with respect to ``g``, and with the pivot at the centre of mass (``l = 0``) those with
+respect to ``com``, are NaN: the motion is smooth there, but the closed form's constants
+(``β ∝ |g| |l|`` and the axis ``±g/|g|``) are not (the numerical solvers give them).
 
-Bad input: non-positive moments or mass, ``I1 ≠ I2``, an off-axis centre of mass or a zero
-quaternion raise ``ValueError`` for concrete input and ``equinox.error_if`` under ``jit``.
+Bad input: non-positive moments or mass, ``I1 ≠ I2``, an off-axis centre of mass, a zero
+quaternion or non-finite ``com``, ``g``, ``q0`` or ``ω0`` raise ``ValueError`` for
+concrete input and ``equinox.error_if`` under ``jit``.
 """
 
 from __future__ import annotations

@@ -113,6 +113,12 @@ def _as_inputs(moments, mass, com, g, q0, omega0):
         lambda: f"got com {com}",
     )
     q0 = fail_if(q0, ~jnp.any(q0 != 0, axis=-1), "lagrange_top: q0 must be a non-zero quaternion")
+    # NaN gravity read as none (|g| through a guarded square root): refused, as NaN elsewhere
+    com, g, q0, omega0 = (
+        fail_if(x, ~jnp.all(jnp.isfinite(x), axis=-1),
+                f"lagrange_top: {name} has non-finite entries (NaN or inf)")
+        for name, x in (("com", com), ("g", g), ("q0", q0), ("omega0", omega0))
+    )
     return moments, mass, com, g, q0, omega0
 
 
@@ -141,7 +147,8 @@ def prepare(
 
     Raises:
         ValueError: wrong shapes, non-positive moments or mass, ``I1 ≠ I2``, ``com`` off
-            the symmetry axis, a zero ``q0`` (``equinox.error_if`` under ``jit``).
+            the symmetry axis, a zero ``q0``, a non-finite ``com``, ``g``, ``q0`` or
+            ``omega0`` (``equinox.error_if`` under ``jit``).
     """
     return _prepare(*_as_inputs(moments, mass, com, g, q0, omega0))
 
@@ -164,11 +171,14 @@ def _prepare(moments, mass, com, g, q0, omega0):
     big_a = 0.5 * (moments[..., 0] + moments[..., 1]) + mass * lever * lever
     big_c = moments[..., 2]
     g2 = jnp.sum(g * g, axis=-1)
-    gnorm = safe_sqrt(g2)
+    # |g| and |l| enter as plain square roots: the motion is smooth in g at g = 0 and in
+    # l at l = 0, but these constants (beta ~ |g||l|, zhat ~ sign(l) g/|g|) are not, so a
+    # derivative there would come out wrong (zero); it comes out NaN instead
+    gnorm = jnp.sqrt(g2)
     down = g / jnp.where(g2 > 0, gnorm, 1.0)[..., None]
     ez = jnp.zeros_like(g).at[..., 2].set(1.0)
     zhat = jnp.where((g2 > 0)[..., None], -sign(lever)[..., None] * down, ez)
-    beta = 2.0 * mass * gnorm * jnp.abs(lever) / big_a
+    beta = 2.0 * mass * gnorm * jnp.sqrt(lever * lever) / big_a
     q_vert = _vertical_frame(zhat)
 
     # ---- scaled variables (time unit 1/nu, a power of two)

@@ -80,7 +80,7 @@ def _evaluate(consts, t):
     d_m2 = c.e_m * c.e_m + c.n_m * cr2
     ok_m = d_m2 > 0
     d_m = jnp.sqrt(jnp.where(ok_m, d_m2, 1.0))
-    re_m = -2.0 * c.wn * sr * dn * jnp.where(ok_m, c.n_m * cr / d_m, jnp.sqrt(c.n_m))
+    re_m = -2.0 * c.wn * sr * dn * jnp.where(ok_m, c.n_m * cr / d_m, safe_sqrt(c.n_m))
     im_m = c.v_m * jnp.where(ok_m, c.e_m / d_m, 0.0)
     big_r_m = safe_sqrt(2.0 * c.omu1) * jax.lax.complex(re_m, im_m)
     d_p2 = c.e_p * c.e_p + c.n_p * (c.kp * sr / dn) ** 2

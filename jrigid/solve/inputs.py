@@ -23,7 +23,7 @@ import numpy as np
 
 from jrigid import quaternion as quat
 from jrigid._checks import is_traced
-from jrigid.scene import Scene
+from jrigid.scene import Gravity, Scene
 from jrigid.state import State
 
 __all__ = [
@@ -167,7 +167,8 @@ def validate_shared(ts, rtol, atol, dtype) -> None:
     ts = _converted(ts, dtype, "ts")
     if is_traced((ts, rtol, atol)):
         return
-    checks = shared_checks(np.asarray(ts), np.asarray(rtol), np.asarray(atol))
+    with jax.ensure_compile_time_eval():  # concrete even when called inside a jit
+        checks = shared_checks(np.asarray(ts), np.asarray(rtol), np.asarray(atol))
     for index, (bad, _) in enumerate(checks):
         if bool(bad):
             raise ValueError(message(checks, index, rtol, atol))
@@ -195,6 +196,9 @@ def input_checks(formulation, scene, state: State, ts, rtol, atol) -> list[tuple
     if state.x is not None:
         out.append((~(finite(state.x) & finite(state.v)), "initial_state.x or .v is not finite"))
     out.extend(scene.body.problems())
+    for load in scene.loads:  # (concrete values are checked when a Gravity is made)
+        if isinstance(load, Gravity):
+            out.append((~finite(load.g), "Gravity.g is not finite (NaN or inf)"))
     domain = formulation.domain_error(scene, normalised(state))
     if domain is not None:
         out.append(domain)
@@ -309,8 +313,8 @@ def screen(checks, scene: Scene, state: State, ts, rtol, atol):
 
     Returns ``(invalid, cause, scene, state, ts, rtol, atol)``: ``invalid ()`` bool,
     ``cause ()`` the index of the first failed check, and the inputs with every array
-    of an invalid member replaced by a benign one (a unit sphere at rest, the identity
-    orientation, ``ts`` spread evenly over ``[0, 1]``, the default tolerances), so that
+    of an invalid member replaced by a benign one (a unit sphere at rest, no gravity, the
+    identity orientation, ``ts`` spread evenly over ``[0, 1]``, the default tolerances), so that
     its solve is quick and finite; its outputs are then set to NaN and its result to
     :attr:`~jrigid.trajectory.Result.invalid_input` by :func:`~jrigid.solve.outcome.finish`.
     """
@@ -330,7 +334,11 @@ def screen(checks, scene: Scene, state: State, ts, rtol, atol):
             pick(jnp.array([1.0, 0.0, 0.0, 0.0]), body.frame),
         ),
     )
-    scene = eqx.tree_at(lambda s: s.body, scene, body)
+    loads = tuple(
+        eqx.tree_at(lambda g: g.g, load, pick(jnp.zeros(3), load.g))
+        if isinstance(load, Gravity) else load for load in scene.loads
+    )
+    scene = eqx.tree_at(lambda s: (s.body, s.loads), scene, (body, loads))
     identity = jnp.array([1.0, 0.0, 0.0, 0.0], dtype)
     state = State(
         pick(identity, state.q),
