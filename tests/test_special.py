@@ -331,3 +331,39 @@ def test_float32(float32):
         assert abs(float(pi) / float(mp.ellippi(-1.5, 2.0, 0.8)) - 1) < 1e-6
     g = jax.grad(lambda x: sp.cn(x, m))(jnp.float32(1.0))
     assert g.dtype == jnp.float32 and np.isfinite(g)
+
+
+NAN = float("nan")
+
+
+@pytest.mark.parametrize("call", [
+    lambda: sp.ellipj(0.7, NAN)[0], lambda: sp.ellipj(0.7, m1=NAN)[2], lambda: sp.ellipk(NAN),
+    lambda: sp.ellipe(NAN), lambda: sp.ellipkinc(1.0, NAN), lambda: sp.ellipeinc(1.0, NAN),
+    lambda: sp.ellippi(0.3, NAN), lambda: sp.ellippi(NAN, 0.5),
+    lambda: sp.ellippiinc(0.3, 1.0, NAN),
+    lambda: sp.elliprf(NAN, 1.0, 1.0), lambda: sp.elliprd(1.0, 1.0, NAN),
+    lambda: sp.elliprj(1.0, 1.0, 1.0, NAN), lambda: sp.elliprc(NAN, 1.0),
+])
+def test_a_nan_argument_gives_nan(call):
+    """They returned finite values: ellipj(u, nan) the m = 1 functions, ellipk(nan)
+    31869.9, elliprf(nan, 1, 1) π/2 (a NaN read as zero)."""
+    assert np.isnan(float(call()))
+
+
+@pytest.mark.parametrize("name, args", [("elliprf", (0.0, 0.0, 1.0)), ("elliprf", (0.0, 2.0, 0.0)),
+                                        ("elliprd", (0.0, 0.0, 1.0)),
+                                        ("elliprj", (0.0, 0.0, 1.0, 1.0)),
+                                        ("elliprj", (2.0, 0.0, 0.0, 0.5))])
+def test_carlson_integrals_with_two_zero_arguments_diverge_as_scipys(name, args):
+    """A fixed number of duplication steps gave 3e4 to 7e9."""
+    assert float(getattr(sp, name)(*args)) == getattr(ss, name)(*args) == np.inf
+
+
+def test_m_and_m1_that_disagree_give_nan():
+    """ellipj(1, m=0.5, m1=0.1) gave sn = 1.41; ellipk(0.5, m1=0.1) returned K(0.9)."""
+    assert np.all(np.isnan(np.asarray(sp.ellipj(1.0, 0.5, m1=0.1))))
+    assert np.isnan(float(sp.ellipk(0.5, m1=0.1)))
+    # agreeing to rounding is fine, including m1 = 1 - m rounded
+    m = 0.7
+    assert float(sp.ellipk(m, m1=1.0 - m)) == pytest.approx(ss.ellipk(m), rel=1e-15)
+    np.testing.assert_allclose(sp.ellipj(0.3, m, m1=1.0 - m), ss.ellipj(0.3, m), rtol=1e-14)

@@ -21,7 +21,9 @@ float64, and are differentiable (forward and reverse mode) in all arguments. In 
 they agree with 30-digit mpmath to 1e-14 relative, or, for large arguments, to within a
 few times the change caused by rounding the argument itself (``eps |u f'(u)|``); see
 ``tests/test_special.py``. Arguments outside the documented domain give NaN rather than
-raising, so that the functions can run under ``jit``.
+raising, so that the functions can run under ``jit``: a NaN argument, ``m`` and ``m1``
+that do not agree, a negative Carlson argument; where an integral diverges (``K(1)``,
+``R_F`` or ``R_J`` with two zero arguments, ``R_D(0, 0, z)``) the value is ``inf``.
 """
 
 from jrigid.special import _carlson, _jacobi, _legendre  # noqa: I001

@@ -39,6 +39,13 @@ def _safe_sqrt(x):
     return jnp.where(pos, jnp.sqrt(jnp.where(pos, x, 1.0)), 0.0)
 
 
+def _two_zeros(x, y, z):
+    """Where two of ``x, y, z`` are zero: ``R_F`` and ``R_J`` diverge there (a fixed
+    number of duplication steps would return a large finite number)."""
+    zx, zy, zz = x == 0, y == 0, z == 0
+    return (zx & zy) | (zx & zz) | (zy & zz)
+
+
 def _rc1(t):
     """``R_C(1, 1 + t)`` for ``t > -1``: ``atan(√t)/√t`` or ``atanh(√-t)/√-t``."""
     small = jnp.abs(t) < 1e-3
@@ -184,9 +191,9 @@ def elliprf(x, y, z) -> jax.Array:
         Negative arguments give NaN.
     """
     x, y, z = as_floats(x, y, z, broadcast=True)
-    bad = (x < 0) | (y < 0) | (z < 0)
+    bad = ~(x >= 0) | ~(y >= 0) | ~(z >= 0)  # (NaN too)
     out = _rf_sqrt(_safe_sqrt(x), _safe_sqrt(y), _safe_sqrt(z))
-    return jnp.where(bad, jnp.nan, out)
+    return jnp.where(bad, jnp.nan, jnp.where(_two_zeros(x, y, z), jnp.inf, out))
 
 
 @jax.jit
@@ -200,9 +207,9 @@ def elliprd(x, y, z) -> jax.Array:
         ``(...)`` array; matches ``scipy.special.elliprd``. Invalid arguments give NaN.
     """
     x, y, z = as_floats(x, y, z, broadcast=True)
-    bad = (x < 0) | (y < 0) | (z <= 0)
+    bad = ~(x >= 0) | ~(y >= 0) | ~(z > 0)  # (NaN too)
     out = _rd_sqrt(_safe_sqrt(x), _safe_sqrt(y), _safe_sqrt(jnp.where(bad, 1.0, z)))
-    return jnp.where(bad, jnp.nan, out)
+    return jnp.where(bad, jnp.nan, jnp.where((x == 0) & (y == 0), jnp.inf, out))
 
 
 @jax.jit
@@ -217,10 +224,10 @@ def elliprj(x, y, z, p) -> jax.Array:
         ``(...)`` array; matches ``scipy.special.elliprj`` for ``p > 0``.
     """
     x, y, z, p = as_floats(x, y, z, p, broadcast=True)
-    bad = (x < 0) | (y < 0) | (z < 0) | (p <= 0)
+    bad = ~(x >= 0) | ~(y >= 0) | ~(z >= 0) | ~(p > 0)  # (NaN too)
     sp = _safe_sqrt(jnp.where(bad, 1.0, p))
     out = _rj_sqrt(_safe_sqrt(x), _safe_sqrt(y), _safe_sqrt(z), sp, _STEPS_RJ_WIDE)
-    return jnp.where(bad, jnp.nan, out)
+    return jnp.where(bad, jnp.nan, jnp.where(_two_zeros(x, y, z), jnp.inf, out))
 
 
 @jax.jit
@@ -234,7 +241,7 @@ def elliprc(x, y) -> jax.Array:
         ``(...)`` array; matches ``scipy.special.elliprc`` for ``y > 0``.
     """
     x, y = as_floats(x, y, broadcast=True)
-    bad = (x < 0) | (y <= 0)
+    bad = ~(x >= 0) | ~(y > 0)  # (NaN too)
     ys = jnp.where(bad, 1.0, y)
     r = jnp.where(bad, 1.0, x) / ys
     # R_C(r, 1) = arccos(√r)/√(1-r) for r < 1, arccosh(√r)/√(r-1) for r > 1; near r = 1

@@ -125,7 +125,7 @@ def _jacobi(u, m, m1, kk):
     sr = jnp.where(r < 0, -sr, sr)
     phi = j * jnp.pi + jnp.arctan2(sr, cr)
     sign = _parity_sign(j)
-    bad = (m1 < 0) | (m1 > 1) | ~jnp.isfinite(u)
+    bad = ~((m1 >= 0) & (m1 <= 1)) | ~jnp.isfinite(u)  # (NaN too)
     nan = jnp.nan
     return (
         jnp.where(bad, nan, sign * sr),
@@ -210,8 +210,9 @@ def ellipj(u, m=None, *, m1=None):
         u: ``(...)`` argument, any real value.
         m: ``(...)`` parameter in ``[0, 1]``, or
         m1: ``(...)`` complement ``1 - m`` (keyword): exact near the separatrix ``m → 1``,
-            e.g. ``ellipj(u, m1=1e-13)``. If both are given they must agree to rounding;
-            each is then used where it is the accurate one.
+            e.g. ``ellipj(u, m1=1e-13)``. If both are given they must agree to rounding
+            (``|m + m1 − 1| ≤ 8 eps``, else the values are NaN); each is then used where
+            it is the accurate one.
 
     Returns:
         ``(sn, cn, dn, am)``, each ``(...)``; ``am`` is continuous (unwrapped). Outside

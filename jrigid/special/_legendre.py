@@ -38,6 +38,10 @@ def _params(m, m1, *others):
         m = 1.0 - m1
     else:
         m, m1, *others = as_floats(m, m1, *others, broadcast=True)
+        # both given: they must agree to rounding, else neither is trusted (NaN)
+        tol = 8 * jnp.finfo(m.dtype).eps * jnp.maximum(1.0, jnp.maximum(jnp.abs(m), jnp.abs(m1)))
+        clash = ~(jnp.abs(m + m1 - 1.0) <= tol)
+        m, m1 = jnp.where(clash, jnp.nan, m), jnp.where(clash, jnp.nan, m1)
     return m, m1, others
 
 
@@ -110,7 +114,7 @@ def ellipk(m=None, *, m1=None) -> jax.Array:
         ``(...)`` array, equal to ``scipy.special.ellipk(m)`` / ``ellipkm1(m1)``.
     """
     m, m1, _ = _params(m, m1)
-    return jnp.where(m1 < 0, jnp.nan, jnp.where(m1 == 0, jnp.inf, _k(m1)))
+    return jnp.where(~(m1 >= 0), jnp.nan, jnp.where(m1 == 0, jnp.inf, _k(m1)))
 
 
 @jax.jit
@@ -124,7 +128,7 @@ def ellipe(m=None, *, m1=None) -> jax.Array:
         ``(...)`` array, equal to ``scipy.special.ellipe``.
     """
     m, m1, _ = _params(m, m1)
-    return jnp.where(m1 < 0, jnp.nan, jnp.where(m1 == 0, 1.0, _e(m, m1)))
+    return jnp.where(~(m1 >= 0), jnp.nan, jnp.where(m1 == 0, 1.0, _e(m, m1)))
 
 
 @jax.jit
@@ -141,7 +145,7 @@ def ellippi(n, m=None, *, m1=None) -> jax.Array:
         ``(...)`` array.
     """
     m, m1, (n,) = _params(m, m1, n)
-    bad = (m1 <= 0) | (n >= 1)
+    bad = ~(m1 > 0) | ~(n < 1)  # (NaN too)
     return jnp.where(bad, jnp.nan, _pi(jnp.where(bad, 0.0, n), m, jnp.where(bad, 1.0, m1)))
 
 
@@ -162,7 +166,7 @@ def ellipkinc(phi, m=None, *, m1=None) -> jax.Array:
     d2 = m1 + m * c * c
     one = jnp.ones_like(s)
     out = s * _rf_sqrt(c, _safe_sqrt(d2), one) + _times_j(j, ellipk(m, m1=m1))
-    return jnp.where(d2 < 0, jnp.nan, out)
+    return jnp.where(~(d2 >= 0), jnp.nan, out)  # (NaN too)
 
 
 @jax.jit
@@ -188,7 +192,7 @@ def ellipeinc(phi, m=None, *, m1=None) -> jax.Array:
     sd_hi = jnp.where(low | (sd == 0), 1.0, sd)
     e_high = m1 * f + (m * m1 / 3.0) * s**3 * _rd_sqrt(c, one, sd_hi) + m * s * c / sd_hi
     out = jnp.where(low, e_low, e_high) + _times_j(j, ellipe(m, m1=m1))
-    return jnp.where(d2 < 0, jnp.nan, out)
+    return jnp.where(~(d2 >= 0), jnp.nan, out)  # (NaN too)
 
 
 @jax.jit
@@ -210,7 +214,7 @@ def ellippiinc(n, phi, m=None, *, m1=None) -> jax.Array:
     j, s, c = _reduce_amplitude(phi)
     d2 = m1 + m * c * c
     p = 1.0 - n * s * s
-    bad = (d2 < 0) | (p <= 0) | ((j != 0) & (n >= 1))
+    bad = ~(d2 >= 0) | ~(p > 0) | ((j != 0) & ~(n < 1))  # (NaN too)
     one, sd = jnp.ones_like(s), _safe_sqrt(d2)
     sp = _safe_sqrt(jnp.where(bad, 1.0, p))
     out = s * _rf_sqrt(c, sd, one) + (n / 3.0) * s**3 * _rj_sqrt(c, sd, one, sp)
