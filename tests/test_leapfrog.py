@@ -67,3 +67,21 @@ def test_free_rotor_error_falls_fourfold_when_the_step_halves():
         same_rotation(traj.q, q_exact, 1e-2)  # close, and in the same sign convention
         errors.append(float(np.max(np.abs(np.asarray(traj.omega - w_exact)))))
     assert 3.6 < errors[0] / errors[1] < 4.4, errors
+
+
+def test_jit_over_the_step_alone_runs_and_checks_the_other_inputs():
+    """With only dt traced, the (concrete) inputs' checks ended in a
+    TracerBoolConversionError."""
+    import jax
+
+    scene = Scene(RigidBody(jnp.array([1.0, 2.0, 3.0])))
+    state = initial.from_omega(None, jnp.array([1.0, 0.3, 0.7]))
+    ts = jnp.linspace(0.0, 1.0, 3)
+    jitted = jax.jit(lambda dt: leapfrog(scene, state, ts, dt=dt).omega)
+    np.testing.assert_allclose(jitted(0.01), leapfrog(scene, state, ts, dt=0.01).omega,
+                               rtol=1e-12)
+    from jrigid.state import State
+
+    bad = State(state.q, state.qdot.at[1].set(jnp.nan))
+    with pytest.raises(ValueError, match="not finite"):
+        jax.jit(lambda dt: leapfrog(scene, bad, ts, dt=dt).omega)(0.01)

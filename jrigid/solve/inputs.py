@@ -296,7 +296,9 @@ def validate(formulation, scene, state, ts, rtol, atol) -> None:
     """Raise ``ValueError`` for the first failed value check (concrete inputs; else nothing)."""
     if is_traced((scene, state, ts, rtol, atol)):
         return
-    flags = jax.device_get(_flags(formulation, scene, state, ts, rtol, atol))
+    # concrete inputs inside a jit traced over something else (a leapfrog's dt): checked now
+    with jax.ensure_compile_time_eval():
+        flags = jax.device_get(_flags(formulation, scene, state, ts, rtol, atol))
     if flags.any():
         checks = input_checks(formulation, scene, state, ts, rtol, atol)
         raise ValueError(message(checks, int(flags.argmax()), rtol, atol))
