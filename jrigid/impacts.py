@@ -11,12 +11,15 @@ Newton's restitution asks ``u_n⁺ = −e u_n⁻``. With Coulomb friction coeffi
 the impulse is first sought with sticking, ``u_t⁺ = 0``: ``P = K⁻¹(−(1+e) u_n n − u_t)``;
 if it lies in the friction cone ``|P_t| ≤ μ P_n`` it is taken. Otherwise the contact
 slides: ``P = P_n (n + μ t̂)`` along the tangential direction ``t̂`` of the sticking impulse
-(the direction friction would push to stop the slip, i.e. the sliding impulse never
-reverses the tangential velocity), with ``P_n = −(1+e) u_n / (n·K(n + μ t̂))`` from
-the restitution condition. (In 3D the slip direction may turn during a real impact;
-taking it once, from the sticking impulse, is the usual algebraic simplification. With
-friction, Newton's restitution can in rare configurations return a little energy
-(Kane's paradox): :func:`jrigid.contact.simulate_bounces` records the energy at every contact.)
+(the direction friction pushes to stop the slip), with ``P_n = −(1+e) u_n / (n·K(n + μ t̂))``
+from the restitution condition. (In 3D the slip direction may turn during a real impact;
+taking it once, from the sticking impulse, is the usual algebraic simplification, and in a
+few per cent of sliding impacts the slip comes out reversed.) With friction, Newton's
+restitution can return energy (Kane's paradox): with ``e = 1``, in 20–45 % of random
+impacts of a box, by up to half its kinetic energy. Where the impulse would raise the
+kinetic energy it is moved towards the frictionless one, ``P0 + α (P − P0)``, just far
+enough that it does not (the normal velocity after the impact and the friction cone
+are kept): an impact never creates energy (tested over random impacts).
 Frictionless (``μ = 0``): ``P = m_eff (1+e) |u_n| n`` with
 ``m_eff = 1/(n·K n)``, and the kinetic energy drops by ``(1 − e²) ½ m_eff u_n²`` (zero
 for ``e = 1``). Every impulse at a point conserves the angular momentum about that
@@ -179,8 +182,31 @@ def contact_impulse(mass, moments, q, v, omega, r, normal, restitution, friction
     d = n + friction * t_hat
     slide = (-(1.0 + restitution) * un / jnp.dot(n, K @ d)) * d
     inside = jnp.sqrt(jnp.where(nonzero, pt2, 0.0)) <= friction * pn
-    P = jnp.where(inside, stick, slide)
+    P = _no_energy_gain(jnp.where(inside, stick, slide), K, u, un, n, restitution)
     return jnp.where(un < 0, P, jnp.zeros_like(P))
+
+
+def _no_energy_gain(P, K, u, un, n, restitution):
+    """``P``, or where it would raise the kinetic energy (Newton's restitution with friction
+    can: Kane's paradox) the point ``P0 + α (P − P0)`` nearest to it that does not, with
+    ``P0 = (1 + e) m_eff |u_n| n`` the frictionless impulse.
+
+    An impulse ``P`` at a point moving at ``u`` changes the kinetic energy by
+    ``ΔT(P) = P·u + ½ P·K P``; ``ΔT(P0) = −(1 − e²) ½ m_eff u_n² ≤ 0``. Both impulses leave
+    the point at ``u_n⁺ = −e u_n`` and lie in the friction cone, so every ``α ∈ [0, 1]``
+    does too; ``α`` is the root of the quadratic ``ΔT(α) = 0`` in ``[0, 1]``.
+    """
+    p0 = (-(1.0 + restitution) * un / jnp.dot(n, K @ n)) * n
+    d = P - p0
+    a = 0.5 * jnp.dot(d, K @ d)
+    b = jnp.dot(d, u + K @ p0)
+    c = jnp.dot(p0, u + 0.5 * (K @ p0))  # ΔT(P0) ≤ 0
+    gains = a + b + c > 0  # ΔT(P) = a + b + c
+    a, b = jnp.where(gains, a, 1.0), jnp.where(gains, b, 0.0)
+    c = jnp.where(gains, jnp.minimum(c, 0.0), -1.0)
+    s = jnp.sqrt(b * b - 4.0 * a * c)  # ≥ |b|
+    alpha = jnp.where(b > 0, -2.0 * c / (b + s), (s - b) / (2.0 * a))
+    return jnp.where(gains, p0 + jnp.clip(alpha, 0.0, 1.0) * d, P)
 
 
 def apply_impulse(mass, moments, q, v, omega, r, impulse) -> tuple[jax.Array, jax.Array]:
