@@ -100,6 +100,11 @@ class Floor(AbstractLoad):
     def __check_init__(self):
         if self.points.ndim != 2 or self.points.shape[1] != 3 or self.points.shape[0] < 1:
             raise ValueError(f"Floor points must have shape (K, 3), got {self.points.shape}")
+        for name in ("height", "restitution", "friction"):
+            if jnp.shape(getattr(self, name)) != ():
+                raise ValueError(f"Floor {name} must be a scalar, got shape "
+                                 f"{jnp.shape(getattr(self, name))} (one floor per scene; "
+                                 "jax.vmap over scenes for several)")
         if is_traced(self.points, self.height, self.restitution, self.friction):
             return
         e, mu = float(self.restitution), float(self.friction)
@@ -290,7 +295,7 @@ def simulate_bounces(
         solver: diffrax solver, default :data:`jrigid.solve.DEFAULT_SOLVER`, wrapped in
             :class:`~jrigid.solve.ProjectedSolver`.
         rtol, atol: step-size tolerances (defaults as :func:`jrigid.simulate`).
-        max_bounces: stop after this many contacts (status ``"max_bounces"``).
+        max_bounces: stop after this many contacts, at least 1 (status ``"max_bounces"``).
         min_gap, rapid_bounces: resting criterion: ``rapid_bounces`` consecutive contacts
             each within ``min_gap`` (time) of the previous one.
         contact_tol: points within this distance of the floor take part in a contact;
@@ -334,7 +339,7 @@ def simulate_bounces(
     floor = _floor(scene)
     dtype = jnp.result_type(float)
     state, ts, rtol, atol = prepare(scene, initial_state, ts, rtol, atol, dtype)
-    _check_count(max_bounces, "max_bounces", 0)
+    _check_count(max_bounces, "max_bounces", 1)
     _check_count(rapid_bounces, "rapid_bounces", 1)
     _check_positive(min_gap, "min_gap")
     if contact_tol is not None:

@@ -263,6 +263,9 @@ class Trajectory(eqx.Module):
         ``t`` gives ``K = 1``: every field keeps its time axis).
 
         Needs ``simulate(..., dense=True)``. The solver statistics are carried over.
+        Outside the solved interval (or after a failed solve stopped) a numerical
+        solve's interpolation gives NaN; the closed forms (``solver="exact"``) give the
+        exact motion at any time.
         For a batch of trajectories (``jax.vmap(simulate)``) call it under ``jax.vmap``
         too.
 

@@ -246,6 +246,8 @@ def test_floor_and_entry_points_reject_bad_input():
         contact.Floor(pts, 0.0, 0.5, -1.0)
     with pytest.raises(ValueError, match="shape"):
         contact.Floor(jnp.zeros(3))
+    with pytest.raises(ValueError, match="restitution must be a scalar"):
+        contact.Floor(pts, 0.0, jnp.array([0.5, 0.5]))  # a raw TypeError before
     body = RigidBody(inertia.box(1.0, 1.0, 1.0, 1.0), 1.0)
     scene = Scene(body, FreeFlight(), (Gravity(), contact.Floor(pts)))
     state = initial.from_omega(None, (0.0, 0.0, 0.0), x=(0.0, 0.0, 2.0), v=(0.0, 0.0, 0.0))
@@ -270,7 +272,8 @@ def test_floor_and_entry_points_reject_bad_input():
         ({"rapid_bounces": 0}, "rapid_bounces must be an int >= 1"),
         ({"rapid_bounces": True}, "rapid_bounces must be an int >= 1"),
         ({"rapid_bounces": 2.5}, "rapid_bounces must be an int >= 1"),
-        ({"max_bounces": -1}, "max_bounces must be an int >= 0"),
+        ({"max_bounces": -1}, "max_bounces must be an int >= 1"),
+        ({"max_bounces": 0}, "max_bounces must be an int >= 1"),  # it recorded one bounce
     ],
 )
 def test_simulate_bounces_refuses_bad_resting_and_contact_settings(kwargs, message):
