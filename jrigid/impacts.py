@@ -201,7 +201,8 @@ def _no_energy_gain(P, K, u, un, n, restitution):
     a = 0.5 * jnp.dot(d, K @ d)
     b = jnp.dot(d, u + K @ p0)
     c = jnp.dot(p0, u + 0.5 * (K @ p0))  # ΔT(P0) ≤ 0
-    gains = a + b + c > 0  # ΔT(P) = a + b + c
+    # ΔT(P) = a + b + c; where P is P0 (no friction: a = 0) there is nothing to move
+    gains = (a + b + c > 0) & (a > 0)
     a, b = jnp.where(gains, a, 1.0), jnp.where(gains, b, 0.0)
     c = jnp.where(gains, jnp.minimum(c, 0.0), -1.0)
     s = jnp.sqrt(b * b - 4.0 * a * c)  # ≥ |b|

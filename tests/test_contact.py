@@ -340,3 +340,22 @@ def test_ball_comes_to_rest_before_the_zeno_time():
     assert x[-1, 2] == pytest.approx(a, abs=1e-9)
     np.testing.assert_array_equal(np.asarray(run.trajectory.v)[-1], 0.0)
     assert run.dropped_energy < 0.5 * (g * 1e-3) ** 2  # below ½ (g · gap)² (unit mass)
+
+
+def test_frictionless_elastic_impulses_stay_the_frictionless_formula():
+    """μ = 0, e = 1: the impulse is P0 itself, whose energy change is rounding of either
+    sign; moving it towards P0 divided 0 by 0 (NaN, and a failed 3-D bounce run)."""
+    from jrigid import impacts
+
+    rng = np.random.default_rng(5)
+    m, moments, n = 1.0, jnp.array([0.4, 0.7, 0.9]), jnp.array([0.0, 0.0, 1.0])
+    q = jax.vmap(quat.normalize)(jnp.asarray(rng.normal(size=(500, 4))))
+    r, v = jnp.asarray(0.5 * rng.normal(size=(500, 3))), jnp.asarray(rng.normal(size=(500, 3)))
+    w = jnp.asarray(2.0 * rng.normal(size=(500, 3)))
+    P = jax.vmap(lambda *a: impacts.contact_impulse(m, moments, *a, n, 1.0, 0.0))(q, v, w, r)
+    m_eff = jax.vmap(lambda q, r: impacts.effective_mass(m, moments, q, r, n))(q, r)
+    un = (v + jax.vmap(lambda q, w, r: jnp.cross(quat.rotate(q, w), r))(q, w, r))[:, 2]
+    expect = np.where(np.asarray(un) < 0, -2.0 * np.asarray(m_eff * un), 0.0)
+    assert np.all(np.isfinite(np.asarray(P)))
+    np.testing.assert_allclose(np.asarray(P)[:, 2], expect, rtol=1e-12, atol=1e-15)
+    np.testing.assert_array_equal(np.asarray(P)[:, :2], 0.0)
