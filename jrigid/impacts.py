@@ -197,10 +197,10 @@ def _no_energy_gain(P, K, u, un, n, restitution):
     does too; ``α`` is the root of the quadratic ``ΔT(α) = 0`` in ``[0, 1]``.
     """
     p0 = (-(1.0 + restitution) * un / jnp.dot(n, K @ n)) * n
-    d = P - p0
+    d, kp0 = P - p0, K @ p0
     a = 0.5 * jnp.dot(d, K @ d)
-    b = jnp.dot(d, u + K @ p0)
-    c = jnp.dot(p0, u + 0.5 * (K @ p0))  # ΔT(P0) ≤ 0
+    b = jnp.dot(d, u + kp0)
+    c = jnp.dot(p0, u + 0.5 * kp0)  # ΔT(P0) ≤ 0
     # ΔT(P) = a + b + c; where P is P0 (no friction: a = 0) there is nothing to move
     gains = (a + b + c > 0) & (a > 0)
     a, b = jnp.where(gains, a, 1.0), jnp.where(gains, b, 0.0)
