@@ -306,8 +306,12 @@ def _solve_body(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoint,
 def _solve_arrays(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoint, max_steps,
                   project, dense, saveat, stepsize_controller, event, saves_itself):
     checks = input_checks(formulation, scene, state, ts, rtol, atol)
+    if dt0 is not None:  # (traced here under jit: a concrete one was checked already)
+        checks.append((~(jnp.isfinite(dt0) & (dt0 > 0)), "dt0 must be finite and > 0"))
     messages = tuple(m for _, m in checks)
     invalid, cause, scene, state, ts, rtol, atol = screen(checks, scene, state, ts, rtol, atol)
+    if dt0 is not None:  # the stand-in's first step: a hundredth of its span
+        dt0 = jnp.where(invalid, 0.01 * (ts[-1] - ts[0]), dt0)
     state = normalised(state)
     y0 = formulation.from_state(scene, state)
     flat = Flat.of(formulation, y0)  # one array in the loop: fewer operations per step

@@ -750,6 +750,9 @@ def test_bad_input_raises():
         exact.prepare(np.ones(2), Q0, np.ones(3))
     with pytest.raises(ValueError, match="shape"):
         exact.prepare(np.ones(3), Q0[:3], np.ones(3))
+    # An inertia tensor passed for the moments: the message says how it was read.
+    with pytest.raises(ValueError, match="read as a batch of principal-moment vectors"):
+        exact.solve(np.diag([1.0, 2.0, 3.0]), Q0, np.ones(3), np.ones(2))
 
 
 def test_concrete_moments_captured_by_jit():

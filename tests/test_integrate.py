@@ -498,6 +498,21 @@ def test_orientation_of_any_scale_integrates_as_the_unit_one():
         np.testing.assert_allclose(traj.omega, ref.omega, rtol=0, atol=1e-12)
 
 
+def test_traced_dt0_is_checked():
+    """A ``dt0`` traced by ``jit``/``vmap`` is checked like a concrete one: NaN read as a
+    non-finite state, a negative one reached diffrax's check in unit time."""
+    state = initial.from_omega(Q0, OMEGA0)
+    dt0s = jnp.array([0.01, -0.1, jnp.nan, 0.0])
+    trajs = jax.vmap(lambda d: simulate(free_scene(), state, TS[:11], dt0=d, throw=False))(dt0s)
+    np.testing.assert_array_equal(trajs.result, [Result.success] + [Result.invalid_input] * 3)
+    alone = simulate(free_scene(), state, TS[:11], dt0=0.01)
+    np.testing.assert_allclose(trajs.q[0], alone.q, rtol=0, atol=1e-13)
+    assert np.isnan(np.asarray(trajs.q[1:])).all()
+    with pytest.raises(Exception, match="dt0 must be finite and > 0"):
+        jax.block_until_ready(jax.jit(lambda d: simulate(free_scene(), state, TS[:11], dt0=d).q)(
+            jnp.nan))
+
+
 def test_invalid_members_of_a_vmap_get_their_own_code():
     """One bad member (zero quaternion, non-physical body, zero frame) never stops the
     others."""

@@ -104,12 +104,21 @@ def _as_inputs(moments, q0, omega0, allow_nonphysical):
     if omega0.shape[-1:] != (3,):
         raise ValueError(f"omega0 must have shape (..., 3), got {omega0.shape}")
     moments, q0, omega0 = (x.astype(dtype) for x in (moments, q0, omega0))
-    moments = _now_if_concrete(
-        lambda x: inertia_checks.validate(
-            x, kind="moments", allow_nonphysical=allow_nonphysical
-        ),
-        moments,
-    )
+    try:
+        moments = _now_if_concrete(
+            lambda x: inertia_checks.validate(
+                x, kind="moments", allow_nonphysical=allow_nonphysical
+            ),
+            moments,
+        )
+    except ValueError as err:
+        if moments.shape[-2:] != (3, 3):
+            raise
+        raise ValueError(
+            f"{err} (a (..., 3, 3) array is read as a batch of principal-moment vectors; "
+            "for an inertia tensor, take its moments and frame with "
+            "jrigid.inertia.principal_axes, or simulate RigidBody.from_tensor(tensor))"
+        ) from None
     try:
         q0 = _now_if_concrete(lambda x: quat.check_quaternion(x, unit=False), q0)
     except ValueError as err:
