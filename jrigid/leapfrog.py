@@ -26,6 +26,7 @@ from typing import ClassVar
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jax.typing import ArrayLike
 
 from jrigid import linalg
@@ -112,28 +113,61 @@ _VARIABLES = _LeapfrogVariables()
 
 
 @eqx.filter_jit
-def _run(scene, state, ts, rtol, atol, dt, variant):
+def _run(scene, state, ts, rtol, atol, dt, variant, counts):
     state, ts = guard((state, ts), input_checks(_VARIABLES, scene, state, ts, rtol, atol))
     dt = eqx.error_if(dt, ~(jnp.isfinite(dt) & (dt > 0)), "leapfrog: dt must be finite and > 0")
     state = normalised(state)
     L0 = quat.rotate(state.q, scene.inertia() @ state.omega)
     y0 = LeapfrogState(state.q, L0, state.x, state.v)
+    ys, steps = _intervals(scene, ts, dt, variant, y0, counts)
+    ys = jax.tree_util.tree_map(lambda a0, a: jnp.concatenate([a0[None], a]), y0, ys)
+    return finish_sampled(scene, _VARIABLES, ts, ys, steps=steps)
+
+
+def _intervals(scene, ts, dt, variant, y0, counts=None):
+    """The states at ``ts[1:]`` and the step count.
+
+    With ``counts`` (a tuple: each interval's step count, known before tracing) every
+    loop has a fixed length, which reverse mode can enter; an interval with fewer steps
+    than the longest skips the rest. Without (``ts`` or ``dt`` traced), each interval's
+    count is traced: forward-mode derivatives only.
+    """
+    longest = None if counts is None else max(counts)
+    uniform = counts is not None and min(counts) == longest
 
     def interval(carry, i):
         y, steps = carry
         span = ts[i + 1] - ts[i]
-        n = jnp.maximum(jnp.ceil(span / dt - 1e-9), 1.0)
-        h = span / n
+        if counts is None:
+            n = jnp.maximum(jnp.ceil(span / dt - 1e-9), 1.0).astype(jnp.int32)
+        else:
+            n = jnp.asarray(counts, dtype=jnp.int32)[i]
+        h = span / n.astype(span.dtype)
 
-        def body(k, yk):
+        def step(k, yk):
             return leapfrog_step(scene, ts[i] + k * h, yk, h, variant)
 
-        y = jax.lax.fori_loop(0, n.astype(jnp.int32), body, y)
-        return (y, steps + n.astype(jnp.int32)), y
+        if counts is None:
+            y = jax.lax.fori_loop(0, n, step, y)
+        elif uniform:
+            y = jax.lax.fori_loop(0, longest, step, y)
+        else:
+            y = jax.lax.fori_loop(
+                0, longest, lambda k, yk: jax.lax.cond(k < n, step, lambda k, yk: yk, k, yk), y
+            )
+        return (y, steps + n), y
 
     (_, steps), ys = jax.lax.scan(interval, (y0, jnp.int32(0)), jnp.arange(ts.shape[0] - 1))
-    ys = jax.tree_util.tree_map(lambda a0, a: jnp.concatenate([a0[None], a]), y0, ys)
-    return finish_sampled(scene, _VARIABLES, ts, ys, steps=steps)
+    return ys, steps
+
+
+def _counts(ts, dt) -> tuple[int, ...] | None:
+    """Each output interval's step count ``⌈Δ/dt⌉`` (at least 1), as :func:`_intervals`
+    computes it when traced, or ``None`` if ``ts`` or ``dt`` is traced."""
+    if isinstance(ts, jax.core.Tracer) or isinstance(dt, jax.core.Tracer):
+        return None
+    span, dt = np.diff(np.asarray(ts)), np.asarray(dt)
+    return tuple(int(n) for n in np.maximum(np.ceil(span / dt - 1e-9), 1.0))
 
 
 def leapfrog(
@@ -150,8 +184,11 @@ def leapfrog(
         scene: the :class:`~jrigid.scene.Scene`.
         initial_state: :class:`~jrigid.state.State` at ``ts[0]``.
         ts: ``(T,)`` strictly increasing output times.
-        dt: ``()`` largest step; each output interval uses ``⌈Δ/dt⌉`` equal steps
-            (traced: changing it does not recompile).
+        dt: ``()`` largest step; each output interval uses ``⌈Δ/dt⌉`` equal steps.
+            With ``ts`` and ``dt`` concrete the step counts are fixed before tracing,
+            and ``jax.grad`` works through the steps; with either traced (changing
+            ``dt`` then does not recompile) the counts are computed in the program, and
+            only forward mode (``jax.jacfwd``) differentiates it.
         variant: ``"midpoint"`` (default, second order) or ``"chapter"`` (first order).
 
     Returns:
@@ -168,4 +205,4 @@ def leapfrog(
     validate(_VARIABLES, scene, state, ts, rtol, atol)
     if not isinstance(dt, jax.core.Tracer) and not bool(jnp.isfinite(dt) & (dt > 0)):
         raise ValueError(f"dt must be finite and > 0, got {dt}")
-    return _run(scene, state, ts, rtol, atol, dt, variant)
+    return _run(scene, state, ts, rtol, atol, dt, variant, _counts(ts, dt))
