@@ -113,41 +113,42 @@ _VARIABLES = _LeapfrogVariables()
 
 
 @eqx.filter_jit
-def _run(scene, state, ts, rtol, atol, dt, variant, counts):
+def _run(scene, state, ts, rtol, atol, dt, variant, steps_bound):
     state, ts = guard((state, ts), input_checks(_VARIABLES, scene, state, ts, rtol, atol))
     dt = eqx.error_if(dt, ~(jnp.isfinite(dt) & (dt > 0)), "leapfrog: dt must be finite and > 0")
     state = normalised(state)
     L0 = quat.rotate(state.q, scene.inertia() @ state.omega)
     y0 = LeapfrogState(state.q, L0, state.x, state.v)
-    ys, steps = _intervals(scene, ts, dt, variant, y0, counts)
+    ys, steps = _intervals(scene, ts, dt, variant, y0, steps_bound)
     ys = jax.tree_util.tree_map(lambda a0, a: jnp.concatenate([a0[None], a]), y0, ys)
     return finish_sampled(scene, _VARIABLES, ts, ys, steps=steps)
 
 
-def _intervals(scene, ts, dt, variant, y0, counts=None):
+def _intervals(scene, ts, dt, variant, y0, steps_bound):
     """The states at ``ts[1:]`` and the step count.
 
-    With ``counts`` (a tuple: each interval's step count, known before tracing) every
-    loop has a fixed length, which reverse mode can enter; an interval with fewer steps
-    than the longest skips the rest. Without (``ts`` or ``dt`` traced), each interval's
-    count is traced: forward-mode derivatives only.
+    Each interval takes ``⌈Δ/dt⌉`` equal steps. With ``steps_bound`` (``(longest,
+    uniform)``: the largest of those counts and whether they are all equal, known
+    before tracing) every loop has a fixed length, which reverse mode can enter; an
+    interval with fewer steps than the longest skips the rest. With ``None`` (``ts`` or
+    ``dt`` traced) the loops' lengths are traced: forward-mode derivatives only.
     """
-    longest = None if counts is None else max(counts)
-    uniform = counts is not None and min(counts) == longest
+    longest, uniform = (None, False) if steps_bound is None else steps_bound
 
     def interval(carry, i):
         y, steps = carry
         span = ts[i + 1] - ts[i]
-        if counts is None:
-            n = jnp.maximum(jnp.ceil(span / dt - 1e-9), 1.0).astype(jnp.int32)
-        else:
-            n = jnp.asarray(counts, dtype=jnp.int32)[i]
+        n = jnp.maximum(jnp.ceil(span / dt - 1e-9), 1.0).astype(jnp.int32)
+        if uniform:
+            n = jnp.int32(longest)
+        elif longest is not None:  # (equal to the count computed before tracing)
+            n = jnp.minimum(n, longest)
         h = span / n.astype(span.dtype)
 
         def step(k, yk):
             return leapfrog_step(scene, ts[i] + k * h, yk, h, variant)
 
-        if counts is None:
+        if longest is None:
             y = jax.lax.fori_loop(0, n, step, y)
         elif uniform:
             y = jax.lax.fori_loop(0, longest, step, y)
@@ -161,13 +162,14 @@ def _intervals(scene, ts, dt, variant, y0, counts=None):
     return ys, steps
 
 
-def _counts(ts, dt) -> tuple[int, ...] | None:
-    """Each output interval's step count ``⌈Δ/dt⌉`` (at least 1), as :func:`_intervals`
-    computes it when traced, or ``None`` if ``ts`` or ``dt`` is traced."""
+def _steps_bound(ts, dt) -> tuple[int, bool] | None:
+    """``(longest, uniform)`` of the intervals' step counts ``⌈Δ/dt⌉`` (at least 1), as
+    :func:`_intervals` computes them, or ``None`` if ``ts`` or ``dt`` is traced."""
     if isinstance(ts, jax.core.Tracer) or isinstance(dt, jax.core.Tracer):
         return None
     span, dt = np.diff(np.asarray(ts)), np.asarray(dt)
-    return tuple(int(n) for n in np.maximum(np.ceil(span / dt - 1e-9), 1.0))
+    counts = np.maximum(np.ceil(span / dt - 1e-9), 1.0)
+    return int(counts.max()), bool(counts.min() == counts.max())
 
 
 def leapfrog(
@@ -185,10 +187,11 @@ def leapfrog(
         initial_state: :class:`~jrigid.state.State` at ``ts[0]``.
         ts: ``(T,)`` strictly increasing output times.
         dt: ``()`` largest step; each output interval uses ``⌈Δ/dt⌉`` equal steps.
-            With ``ts`` and ``dt`` concrete the step counts are fixed before tracing,
-            and ``jax.grad`` works through the steps; with either traced (changing
-            ``dt`` then does not recompile) the counts are computed in the program, and
-            only forward mode (``jax.jacfwd``) differentiates it.
+            With ``ts`` and ``dt`` concrete the loops' lengths are fixed before
+            tracing, and ``jax.grad`` works through the steps (a ``dt`` that changes
+            the longest interval's count compiles anew); with either traced (under
+            ``jax.jit``: changing ``dt`` does not recompile) they are computed in the
+            program, and only forward mode (``jax.jacfwd``) differentiates it.
         variant: ``"midpoint"`` (default, second order) or ``"chapter"`` (first order).
 
     Returns:
@@ -205,4 +208,4 @@ def leapfrog(
     validate(_VARIABLES, scene, state, ts, rtol, atol)
     if not isinstance(dt, jax.core.Tracer) and not bool(jnp.isfinite(dt) & (dt > 0)):
         raise ValueError(f"dt must be finite and > 0, got {dt}")
-    return _run(scene, state, ts, rtol, atol, dt, variant, _counts(ts, dt))
+    return _run(scene, state, ts, rtol, atol, dt, variant, _steps_bound(ts, dt))
