@@ -328,6 +328,10 @@ def test_slerp_endpoints_shorter_arc_and_batch():
     assert out.shape == (4, 3, 1, 2, 4)
     np.testing.assert_allclose(jq.slerp(p, -q, t), out, atol=1e-13)
     np.testing.assert_allclose(jq.slerp(p, p, 0.3), p, atol=1e-15)
+    # any finite non-zero norm: a unit result, ±q at t = 1 (it was scaled by |p|)
+    out = jq.slerp(2.0 * p, -3.0 * q, t)
+    np.testing.assert_allclose(jq.norm(out), 1.0, rtol=1e-14)
+    np.testing.assert_allclose(out, jq.slerp(p, q, t), atol=1e-13)
 
 
 def test_distance():
@@ -339,6 +343,20 @@ def test_distance():
     a, b = random_quaternions(rng, (2, 10))
     ref = (scipy_rot(a).inv() * scipy_rot(b)).magnitude()
     np.testing.assert_allclose(jq.distance(a, b), ref, atol=1e-12)
+    np.testing.assert_allclose(jq.squared_distance(a, -2.0 * b), ref**2, atol=1e-12)
+
+
+def test_squared_distance_is_smooth_where_the_rotations_coincide():
+    """The Hessian of the squared angle in the rotation vector is 2 I, also at p = q,
+    where that of ``distance**2`` is zero (the angle has no derivative there)."""
+    q = jnp.array([0.5, 0.5, 0.5, 0.5])
+    for w in (jnp.zeros(3), jnp.array([1e-3, 0.0, 0.0]), jnp.array([0.3, -0.2, 1.0])):
+        hessian = jax.hessian(lambda w: jq.squared_distance(jq.multiply(q, jq.from_rotvec(w)), q))
+        np.testing.assert_allclose(hessian(w), 2 * np.eye(3), atol=1e-12)
+    zero = jax.hessian(lambda w: jq.distance(jq.multiply(q, jq.from_rotvec(w)), q) ** 2)
+    np.testing.assert_array_equal(zero(jnp.zeros(3)), 0.0)  # what distance**2 gives there
+    half_turn = jq.squared_distance(jnp.array([0.0, 1, 0, 0]), jnp.array([1.0, 0, 0, 0]))
+    np.testing.assert_allclose(half_turn, np.pi**2, rtol=1e-15)
 
 
 @pytest.mark.parametrize("shape", BATCH_SHAPES)

@@ -56,6 +56,14 @@ def test_check_quaternion_inside_jit_and_vmap():
     g = eqx.filter_jit(jax.vmap(jq.check_quaternion))
     with pytest.raises(eqx.EquinoxRuntimeError, match="zero quaternion"):
         jax.block_until_ready(g(np.stack([UNIT, np.zeros(4)])))
+    # A traced tolerance (its value cannot be formatted into the message).
+    tol = jax.jit(lambda a: jq.check_quaternion(UNIT, atol=a))(1e-6)
+    np.testing.assert_array_equal(tol, UNIT)
+    with pytest.raises(Exception, match="not unit length"):
+        jax.block_until_ready(jax.jit(lambda a: jq.check_quaternion(2 * UNIT, atol=a))(1e-6))
+    with pytest.raises(Exception, match="not orthogonal"):
+        jax.block_until_ready(jax.jit(lambda a: jq.check_rotation_matrix(2 * np.eye(3), atol=a))(
+            1e-6))
     # Under grad, a valid input passes and the check is transparent.
     grad = jax.grad(lambda q: jnp.sum(jq.check_quaternion(q) ** 2))(jnp.asarray(UNIT))
     np.testing.assert_allclose(grad, 2 * UNIT)

@@ -45,6 +45,7 @@ __all__ = [
     "rotate",
     "rotate_inverse",
     "slerp",
+    "squared_distance",
     "to_axis_angle",
     "to_rotvec",
     "to_xyzw",
@@ -272,10 +273,12 @@ def to_axis_angle(q: ArrayLike) -> tuple[jax.Array, jax.Array]:
     """Axis and angle of a rotation (eq. 17.27, in a numerically stable form).
 
     The chapter's ``θ = 2 arccos q0`` loses accuracy near 0 and π and has an infinite
-    derivative at ``q0 = ±1``; here ``θ = 2 atan2(|q|, |q0|)``, which is accurate
+    derivative at ``q0 = ±1``; here ``θ = 2 atan2(|(q1, q2, q3)|, |q0|)``, which is accurate
     everywhere and returns ``θ ∈ [0, π]`` (``q`` is first replaced by ``-q`` if
     ``q0 < 0``). For the identity the axis is undefined; ``(1, 0, 0)`` is returned
-    and the gradient there is finite. ``q`` need not be unit (any finite non-zero scale);
+    and the gradient there is finite (zero: the angle, like ``|v|``, has no derivative
+    at the identity, so ``angle**2`` has a zero Hessian there; :func:`to_rotvec` and
+    :func:`squared_distance` are smooth). ``q`` need not be unit (any finite non-zero scale);
     the zero quaternion gives NaN.
     At exactly 180° the axis follows :func:`canonicalize`, so ``q`` and ``-q`` agree.
 
@@ -366,9 +369,36 @@ def distance(p: ArrayLike, q: ArrayLike) -> jax.Array:
 
     Returns:
         ``(...)`` geodesic distance in radians (scale-invariant in ``p`` and ``q``).
+
+    At ``p = ±q`` the distance, like ``|v|`` at ``v = 0``, has no derivative: its
+    gradient there is taken as zero, and so the Hessian of ``distance(p, q)**2`` there
+    is zero, not the true ``2 I`` (in the rotation vector). For a loss to be
+    differentiated twice (Newton steps, curvature at a perfect fit) use
+    :func:`squared_distance`.
     """
     p, q = rescale(quaternion_arg(p, "p"))[0], rescale(quaternion_arg(q))[0]
     return to_axis_angle(multiply(conjugate(q), p))[1]
+
+
+def squared_distance(p: ArrayLike, q: ArrayLike) -> jax.Array:
+    """Squared angle ``distance(p, q)**2`` of the rotation taking ``q`` to ``p``, smooth
+    at ``p = ±q``.
+
+    Computed as ``|to_rotvec(q* ⊗ p)|²``, so that its derivatives of every order are
+    those of the squared angle, also where the two rotations coincide (where
+    ``distance(p, q)**2`` has a zero Hessian: :func:`distance`). Sign-invariant and
+    scale-invariant in ``p`` and ``q``.
+
+    Args:
+        p: ``(..., 4)`` quaternion.
+        q: ``(..., 4)`` quaternion; batch dimensions broadcast.
+
+    Returns:
+        ``(...)`` squared angle in radians², in ``[0, π²]``.
+    """
+    p, q = rescale(quaternion_arg(p, "p"))[0], rescale(quaternion_arg(q))[0]
+    r = to_rotvec(multiply(conjugate(q), p))
+    return dot(r, r)
 
 
 def slerp(p: ArrayLike, q: ArrayLike, t: ArrayLike) -> jax.Array:
@@ -379,14 +409,15 @@ def slerp(p: ArrayLike, q: ArrayLike, t: ArrayLike) -> jax.Array:
     ``p = ±q``.
 
     Args:
-        p: ``(..., 4)`` unit quaternion.
-        q: ``(..., 4)`` unit quaternion.
+        p: ``(..., 4)`` quaternion (any finite non-zero norm: scaled to unit first).
+        q: ``(..., 4)`` quaternion (likewise).
         t: ``(...)`` interpolation parameter; all batch dimensions broadcast.
 
     Returns:
         ``(..., 4)`` unit quaternion.
     """
     p, q = as_float_pair(quaternion_arg(p, "p"), quaternion_arg(q))
+    p, q = unit(p), unit(q)  # (any finite non-zero norm: a unit result, ±q at t = 1)
     rel = to_rotvec(multiply(conjugate(p), q))
     rel, t = as_float_pair(rel, t)
     rel, t = broadcast_batch(rel, 1, t, 0)

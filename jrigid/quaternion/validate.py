@@ -60,7 +60,7 @@ def check_quaternion(q: ArrayLike, *, unit: bool = True, atol: float | None = No
         q = fail_if(
             q,
             jnp.abs(n - 1) > tol,
-            f"quaternion is not unit length (tolerance {tol:g}); "
+            f"quaternion is not unit length (tolerance {_show(tol)}); "
             "normalise it with jrigid.quaternion.normalize",
         )
     return q
@@ -90,9 +90,16 @@ def check_rotation_matrix(matrix: ArrayLike, *, atol: float | None = None) -> ja
     m = fail_if(
         m,
         ortho_err > tol,
-        f"matrix is not orthogonal (tolerance {tol:g}); "
+        f"matrix is not orthogonal (tolerance {_show(tol)}); "
         "use jrigid.quaternion.project_to_rotation for the nearest rotation",
     )
     det = jnp.linalg.det(m)
     m = fail_if(m, jnp.abs(det - 1) > tol, "matrix is not a proper rotation (det R != +1)")
     return m
+
+
+def _show(tol) -> str:
+    """``tol`` for a message: its value if concrete, else ``atol`` (traced under ``jit``)."""
+    if isinstance(tol, jax.core.Tracer):
+        return "atol"
+    return f"{float(tol):g}"
