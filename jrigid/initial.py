@@ -193,17 +193,23 @@ def _euler_pose(angles, rates):
 
 
 def _shortest_arc(a: jax.Array, b: jax.Array) -> jax.Array:
-    """Unit quaternion rotating unit vector ``a`` onto unit vector ``b`` (minimal angle)."""
-    c = jnp.dot(a, b)
-    axis = jnp.cross(a, b)
-    # Antiparallel: rotate by π about any axis normal to a.
+    """Unit quaternion rotating unit vector ``a`` onto unit vector ``b`` (minimal angle).
+
+    ``q ∝ (1 + a·b, a × b)``, written with the half vector ``h = a + b`` as
+    ``(h·h / 2, a × h)``: near antiparallel vectors ``a + b`` is computed exactly (its
+    components cancel), so ``q a q* = b`` to rounding at every angle, where ``1 + a·b``
+    lost ``eps / |a + b|`` (and, to first order, ``h·h / 2`` is ``1 + a·b`` also for a
+    ``b`` whose norm is one only to rounding).
+    """
+    h = a + b
+    n2 = jnp.dot(h, h)
+    anti = n2 <= jnp.finfo(a.dtype).eps ** 2  # antiparallel to rounding: any normal axis
     trial = jnp.where(jnp.abs(a[0]) < 0.9, jnp.array([1.0, 0.0, 0.0]), jnp.array([0.0, 1.0, 0.0]))
     normal = jnp.cross(a, trial.astype(a.dtype))
-    anti = c < -1.0 + 1e3 * jnp.finfo(a.dtype).eps
     q = jnp.where(
         anti,
         jnp.concatenate([jnp.zeros(1, a.dtype), normal]),
-        jnp.concatenate([(1.0 + c)[None], axis]),
+        jnp.concatenate([0.5 * n2[None], jnp.cross(a, h)]),
     )
     return q / jnp.linalg.norm(q)
 

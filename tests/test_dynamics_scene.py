@@ -289,6 +289,20 @@ def test_from_momentum_energy(energy_fraction):
         initial.from_momentum_energy(scene, L, 1.01 * hi)
 
 
+@pytest.mark.parametrize("offset", [0.0, 1e-12, 1e-9, 6e-7, 7e-7, 1e-5, 0.3])
+@pytest.mark.parametrize("sign", [-1.0, 1.0])
+def test_from_momentum_energy_near_the_body_axis_and_its_opposite(offset, sign):
+    """``q ⊗ L_body ⊗ q* = momentum`` to rounding when the momentum is (anti)parallel to
+    the body-frame L or nearly so: within 7e-7 rad of antiparallel the perpendicular part
+    was lost (error 6e-7), and near it the rotation carried 1e-10."""
+    moments = np.array([1.0, 2.0, 3.0])
+    scene = Scene(RigidBody(jnp.asarray(moments)))
+    L = np.array([offset, 0.3 * offset, sign])
+    s = initial.from_momentum_energy(scene, L, L @ L / 6)  # body-frame L along ±(0, 0, 1)
+    got = scipy_rot(s.q).apply(moments * np.asarray(s.omega))
+    np.testing.assert_allclose(got, L, rtol=0, atol=4e-15)
+
+
 def test_tilted():
     s = initial.tilted(1, 0.01, 2.0)
     np.testing.assert_allclose(s.omega, [0.0, 2 * np.cos(0.01), 2 * np.sin(0.01)], atol=1e-14)
