@@ -159,15 +159,18 @@ class RigidBody(eqx.Module):
             A :class:`RigidBody`.
 
         Raises:
-            ValueError: for a non-symmetric, non-finite or non-physical tensor (concrete
-                values only).
+            ValueError: for a non-symmetric, non-finite or non-physical tensor; under a
+                JAX transformation the same checks raise at run time
+                (``equinox.error_if``: :func:`jrigid.inertia.check`).
         """
-        tensor = as_float(tensor)
+        tensor, com = as_float(tensor), as_float(com)
         _exactly(tensor, (3, 3), "tensor")
-        if not is_traced(tensor):
-            inertia.validate(tensor, kind="tensor", allow_nonphysical=allow_nonphysical)
+        _exactly(com, (3,), "com")
+        # Traced (jit, vmap, grad): checked at run time, since the moments and frame
+        # keep no trace of an asymmetric tensor (principal_axes takes its symmetric part).
+        tensor = inertia.validate(tensor, kind="tensor", allow_nonphysical=allow_nonphysical)
         moments, frame = inertia.principal_axes(tensor)
-        com_principal = quat.rotate_inverse(frame, as_float(com))
+        com_principal = quat.rotate_inverse(frame, com)
         return cls(moments, mass, com_principal, frame, allow_nonphysical=allow_nonphysical)
 
     def tensor(self) -> jax.Array:

@@ -68,3 +68,20 @@ def test_from_tensor_diagonalises_a_rotated_tensor():
     np.testing.assert_allclose(F @ np.asarray(body.com), com, atol=1e-12)
     with pytest.raises(ValueError, match="triangle"):
         RigidBody.from_tensor(jnp.diag(jnp.array([1.0, 1.0, 3.0])))
+
+
+def test_from_tensor_checks_a_traced_tensor_and_names_com():
+    """Under jit/vmap an asymmetric tensor was read as its symmetric part, silently (the
+    moments keep no trace of it); a wrongly shaped com was blamed on "v"."""
+    asymmetric = jnp.array([[2.0, -0.6, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 3.0]])
+    symmetric = (asymmetric + asymmetric.T) / 2
+    moments = jax.jit(lambda t: RigidBody.from_tensor(t).moments)
+    np.testing.assert_allclose(moments(symmetric), np.linalg.eigvalsh(symmetric), rtol=1e-12)
+    with pytest.raises(Exception, match="not symmetric"):
+        jax.block_until_ready(moments(asymmetric))
+    with pytest.raises(eqx.EquinoxRuntimeError, match="not symmetric"):
+        jax.block_until_ready(
+            eqx.filter_jit(jax.vmap(lambda t: RigidBody.from_tensor(t).moments))(asymmetric[None])
+        )
+    with pytest.raises(ValueError, match="com must have shape"):
+        RigidBody.from_tensor(symmetric, 1.0, jnp.ones(2))
