@@ -104,7 +104,7 @@ def _broadcast(where: str, **arrays):
 
 def from_omega(
     q0: ArrayLike | None = None,
-    omega: ArrayLike = (0.0, 0.0, 0.0),
+    omega: ArrayLike | None = None,
     *,
     frame: str = "body",
     x: ArrayLike | None = None,
@@ -115,7 +115,7 @@ def from_omega(
     Args:
         q0: ``(..., 4)`` orientation (principal body frame → space); normalised.
             Default identity.
-        omega: ``(..., 3)`` angular velocity.
+        omega: ``(..., 3)`` angular velocity. Default zero (in the dtype of ``q0``).
         frame: ``"body"`` (default) or ``"space"``, the frame ``omega`` is given in.
         x, v: ``(..., 3)`` centre-of-mass position and velocity, for free flight only.
 
@@ -125,8 +125,12 @@ def from_omega(
     """
     if frame not in ("body", "space"):
         raise ValueError(f"frame must be 'body' or 'space', got {frame!r}")
-    omega = _vector(omega, "omega")
-    q0 = quat.identity(dtype=omega.dtype) if q0 is None else unit_quaternion(q0, "q0")
+    if omega is None:
+        q0 = quat.identity() if q0 is None else unit_quaternion(q0, "q0")
+        omega = jnp.zeros(3, q0.dtype)
+    else:
+        omega = _vector(omega, "omega")
+        q0 = quat.identity(dtype=omega.dtype) if q0 is None else unit_quaternion(q0, "q0")
     x, v = _translation(x, v)
     q0, omega, x, v = _broadcast("from_omega", q0=q0, omega=omega, x=x, v=v)
     if frame == "space":

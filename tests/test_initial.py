@@ -127,6 +127,8 @@ def test_dtypes_agree_across_fields(float32):
     assert s.q.dtype == s.qdot.dtype == jnp.float32 and s.q.shape == s.qdot.shape == (3, 4)
     s = initial.tilted(2, jnp.zeros(2, jnp.float32), 1.0)
     assert s.q.dtype == s.qdot.dtype == jnp.float32 and s.q.shape == (2, 4)
+    s = initial.from_omega(np.array([1.0, 0, 0, 0], np.float32))  # default ω: q0's dtype
+    assert s.q.dtype == s.qdot.dtype == jnp.float32
 
 
 def test_other_helpers_broadcast_consistently():

@@ -63,6 +63,8 @@ def test_identity(shape):
         np.asarray(q).reshape(-1, 4), [[1, 0, 0, 0]] * int(np.prod(shape))
     )
     assert jq.identity(dtype=jnp.float32).dtype == jnp.float32
+    with pytest.raises(ValueError, match="floating dtype"):
+        jq.identity(dtype=jnp.int32)
 
 
 def test_hamilton_rules():

@@ -68,8 +68,11 @@ def identity(batch_shape: Sequence[int] = (), dtype=None) -> jax.Array:
         ``(*batch_shape, 4)`` array.
 
     Raises:
-        ValueError: if ``batch_shape`` is not a sequence of non-negative integers.
+        ValueError: if ``batch_shape`` is not a sequence of non-negative integers, or
+            ``dtype`` is not a floating dtype.
     """
+    if dtype is not None and not jnp.issubdtype(dtype, jnp.floating):
+        raise ValueError(f"dtype must be a floating dtype, got {jnp.dtype(dtype)}")
     try:
         shape = tuple(operator.index(n) for n in batch_shape)
     except TypeError:
