@@ -171,9 +171,12 @@ def rescale(x: jax.Array) -> tuple[jax.Array, jax.Array]:
 
 
 def safe_norm(v: jax.Array) -> jax.Array:
-    """Euclidean norm over the last axis, safe for any finite scale (see :func:`rescale`),
-    with a finite (zero) gradient at the zero vector (double ``where``); NaN for a
-    vector with a NaN or infinite entry."""
+    """Euclidean norm of ``(..., n)`` vectors, shape ``(...)``, safe for any finite scale
+    (see :func:`rescale`), with a finite (zero) gradient at the zero vector (double
+    ``where``); NaN for a vector with a NaN or infinite entry.
+
+    The norm has no derivative at zero, so ``safe_norm(v)**2`` has a zero Hessian there
+    (not ``2 I``): differentiate :func:`norm2` for the squared norm."""
     v, s = rescale(v)
     n2 = norm2(v)
     zero = n2 == 0
