@@ -19,7 +19,7 @@ import jax.numpy as jnp
 from jrigid import exact, lagrange_top
 from jrigid import quaternion as quat
 from jrigid.formulations import AbstractFormulation
-from jrigid.scene import Scene
+from jrigid.scene import Gravity, Scene
 from jrigid.solve import finish_sampled, input_checks, normalised, screen
 from jrigid.state import State
 
@@ -44,6 +44,10 @@ def check_scene(scene: Scene) -> None:
             lagrange_top.check_scene(scene)
         except ValueError as error:
             why = str(error)
+        if not any(isinstance(load, Gravity) for load in scene.loads):
+            why += (" (a body on a Pivot without gravity is torque free, but it turns about"
+                    " the pivot, whose inertia tensor is not diagonal in the body's principal"
+                    " frame unless the centre of mass lies on a principal axis)")
         raise ValueError(
             f"solver='exact' needs a torque-free scene or a heavy symmetric top; {why}: "
             "use a diffrax solver"
@@ -113,6 +117,8 @@ def solve(scene, state, ts, rtol, atol, formulation, dense):
         messages.
     """
     checks = input_checks(formulation, scene, state, ts, rtol, atol)
+    if not scene.torque_free:  # (a concrete body was checked by check_scene)
+        checks.extend(lagrange_top.value_checks(scene))
     messages = tuple(m for _, m in checks)
     invalid, cause, scene, state, ts, rtol, atol = screen(checks, scene, state, ts, rtol, atol)
     state = normalised(state)

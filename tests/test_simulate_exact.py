@@ -147,6 +147,30 @@ def test_heavy_symmetric_top_in_closed_form():
     assert np.abs(e - e[0]).max() < 1e-12
 
 
+def test_heavy_top_members_that_are_not_lagrange_tops_get_a_code():
+    """Under vmap the top's symmetry and the axis of its centre of mass are values: with
+    throw=False a member that fails them gets invalid_input (the batch raised), and its
+    healthy neighbours their closed form."""
+    from jrigid.trajectory import Result
+
+    state = initial.from_omega(None, jnp.array([0.5, -1.0, 4.0]))
+    ts = jnp.linspace(0.0, 3.0, 4)
+
+    def run(moments, com, throw):
+        scene = Scene(RigidBody(moments, 1.3, com), Pivot(), Gravity(9.81))
+        return simulate(scene, state, ts, solver="exact", throw=throw)
+
+    moments = jnp.array([[1.0, 1.0, 0.5], [1.0, 1.2, 0.5], [1.0, 1.0, 0.5]])
+    coms = jnp.array([[0.0, 0.0, 0.5], [0.0, 0.0, 0.5], [0.1, 0.0, 0.5]])
+    trajs = jax.vmap(lambda m, c: run(m, c, False))(moments, coms)
+    np.testing.assert_array_equal(trajs.result, [Result.success] + [Result.invalid_input] * 2)
+    assert np.isnan(np.asarray(trajs.q[1:])).all()
+    alone = run(moments[0], coms[0], True)
+    np.testing.assert_allclose(trajs.q[0], alone.q, rtol=0, atol=1e-14)
+    with pytest.raises(eqx.EquinoxRuntimeError, match="heavy symmetric top"):
+        jax.block_until_ready(jax.vmap(lambda m, c: run(m, c, True).q)(moments, coms))
+
+
 @pytest.mark.parametrize("option", ["saveat", "event", "stepsize_controller"])
 def test_options_without_meaning_for_the_closed_form_refused(option):
     """An event, a SaveAt and a step-size controller were silently ignored (an event

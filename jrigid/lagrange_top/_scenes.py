@@ -12,7 +12,7 @@ from jrigid.scene import Gravity, Pivot, Scene
 
 from ._constants import TopConstants, prepare
 
-__all__ = ["applies", "check_scene", "prepare_scene", "scene_gravity"]
+__all__ = ["applies", "check_scene", "prepare_scene", "scene_gravity", "value_checks"]
 
 
 def _problems(scene: Scene) -> list[str]:
@@ -74,6 +74,27 @@ def check_scene(scene: Scene) -> None:
         raise ValueError(
             "the closed-form heavy symmetric top does not apply: " + "; ".join(problems)
         )
+
+
+def value_checks(scene: Scene) -> list[tuple[jax.Array, str]]:
+    """``[(bad, message), ...]``: the body's values that :func:`applies` cannot decide
+    when they are traced (``jit``/``vmap``), as flags for a solve's input checks (an
+    invalid member then gets a result code, not an error).
+
+    Args:
+        scene: a scene with a :class:`~jrigid.scene.Pivot` holder and Gravity loads.
+
+    Returns:
+        ``()`` boolean flags and their messages: ``I1 != I2``, ``com`` off the axis.
+    """
+    moments, com = scene.body.moments, scene.body.com
+    return [
+        (moments[..., 0] != moments[..., 1],
+         "solver='exact' (the heavy symmetric top) needs I1 == I2 exactly"),
+        ((com[..., 0] != 0) | (com[..., 1] != 0),
+         "solver='exact' (the heavy symmetric top) needs the centre of mass on the "
+         "symmetry axis, com = (0, 0, l)"),
+    ]
 
 
 def scene_gravity(scene: Scene) -> jax.Array:
