@@ -482,8 +482,10 @@ def simulate(
             for ``rtol`` (:func:`jrigid.solve.precision_problem`; concrete inputs only).
         max_steps: static step budget (accepted plus rejected steps).
         dt0: initial step; ``None`` lets diffrax choose.
-        adjoint: diffrax adjoint; default ``diffrax.RecursiveCheckpointAdjoint()``
-            (reverse mode), or ``diffrax.ForwardMode()`` when the inputs are being
+        adjoint: diffrax adjoint: ``diffrax.RecursiveCheckpointAdjoint()`` (default,
+            reverse mode), ``diffrax.DirectAdjoint()`` or ``diffrax.ForwardMode()``
+            (``BacksolveAdjoint`` and ``ImplicitAdjoint`` are refused); default
+            ``diffrax.ForwardMode()`` when the inputs are being
             forward-differentiated (``jax.jacfwd``). For ``jax.jacfwd(jax.jit(f))``, where
             the forward derivative is taken outside the ``jit``, pass
             ``adjoint=diffrax.ForwardMode()`` yourself (JAX otherwise fails with "can't
@@ -501,9 +503,16 @@ def simulate(
             times (diffrax's unfilled slots become NaN).
         stepsize_controller: a diffrax controller instead of the PID controller built
             from ``rtol``/``atol`` (e.g. ``diffrax.ConstantStepSize()`` with ``dt0``).
+            It steps to its own tolerances, as diffrax's controllers do (error
+            estimate unscaled, and not divided by 6 for the default form, so the same
+            numbers give a larger error than ``simulate``'s): passing ``rtol`` or
+            ``atol`` as well raises ``ValueError``.
         event: a terminating ``diffrax.Event``; when it fires the result is
             :attr:`~jrigid.trajectory.Result.event` (not a failure) and outputs after
-            ``t_stop`` are NaN. Its functions receive ``args = scene``.
+            ``t_stop`` are NaN. Its functions receive ``args = scene``. Without a
+            ``root_finder`` (e.g. ``optimistix.Newton(rtol, atol)``) the solve stops at
+            the end of the step in which the condition changed sign, so ``t_stop`` is
+            that step's end, not the event's time.
 
     Returns:
         :class:`~jrigid.trajectory.Trajectory`; ``stats`` holds step counts.
@@ -564,6 +573,12 @@ def simulate(
         (scene, initial_state, ts, rtol, atol)
     ):
         adjoint = diffrax.ForwardMode()
+    if stepsize_controller is not None and (rtol is not None or atol is not None):
+        raise ValueError(
+            "rtol and atol do not reach a stepsize_controller you pass (it steps to its own "
+            "tolerances): set them on the controller, e.g. "
+            "diffrax.PIDController(rtol=..., atol=...), and leave out simulate's"
+        )
     state, ts, rtol, atol = prepare(scene, initial_state, ts, rtol, atol, dtype)
     check_scene(formulation, scene)
     _check_saveat(saveat)

@@ -513,6 +513,31 @@ def test_traced_dt0_is_checked():
             jnp.nan))
 
 
+@pytest.mark.parametrize("adjoint", ["BacksolveAdjoint", "ImplicitAdjoint"])
+def test_unsupported_adjoints_are_refused_by_name(adjoint):
+    """BacksolveAdjoint failed under jax.grad with "Unexpected tangent" (or a tracer
+    conversion); ImplicitAdjoint's derivatives are a steady state's."""
+    import diffrax
+
+    with pytest.raises(ValueError, match=f"adjoint={adjoint}\\(\\) is not supported"):
+        simulate(free_scene(), initial.from_omega(Q0, OMEGA0), TS[:3],
+                 adjoint=getattr(diffrax, adjoint)())
+    direct = simulate(free_scene(), initial.from_omega(Q0, OMEGA0), TS[:3],
+                      adjoint=diffrax.DirectAdjoint())
+    np.testing.assert_allclose(direct.q, simulate(free_scene(), initial.from_omega(Q0, OMEGA0),
+                                                  TS[:3]).q, rtol=0, atol=1e-13)
+
+
+def test_tolerances_beside_a_users_controller_are_refused():
+    """rtol/atol passed with a stepsize_controller were silently dropped (rtol 1e-12
+    asked, the controller's 1e-3 used)."""
+    import diffrax
+
+    with pytest.raises(ValueError, match="do not reach a stepsize_controller"):
+        simulate(free_scene(), initial.from_omega(Q0, OMEGA0), TS[:3], rtol=1e-12,
+                 stepsize_controller=diffrax.PIDController(rtol=1e-3, atol=1e-6))
+
+
 def test_invalid_members_of_a_vmap_get_their_own_code():
     """One bad member (zero quaternion, non-physical body, zero frame) never stops the
     others."""

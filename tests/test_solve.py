@@ -198,8 +198,9 @@ def _rotated_runs(stepsize_controller=None):
     runs = []
     for r in Rotation.random(6, random_state=1).as_quat(scalar_first=True):
         state = initial.from_omega(quat.multiply(jnp.asarray(r), Q0), OMEGA0)
-        traj = simulate(free_scene(), state, ts, rtol=1e-6, atol=1e-8,
-                        stepsize_controller=stepsize_controller)
+        tolerances = dict(rtol=1e-6, atol=1e-8) if stepsize_controller is None else {}
+        traj = simulate(free_scene(), state, ts, stepsize_controller=stepsize_controller,
+                        **tolerances)
         runs.append((jnp.asarray(r), traj))
     return runs
 

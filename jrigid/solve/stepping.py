@@ -206,6 +206,19 @@ def _instance(cls):
     return cls()
 
 
+# The adjoints a solve supports. BacksolveAdjoint differentiates the solver's step
+# through its arguments, which the projected solver and the flat state do not allow
+# (JAX failed with "Unexpected tangent" or a tracer conversion); ImplicitAdjoint is
+# exact only at a steady state, which a rigid body's motion over ts is not.
+_ADJOINTS = (diffrax.RecursiveCheckpointAdjoint, diffrax.DirectAdjoint, diffrax.ForwardMode)
+_UNSUPPORTED = {
+    "BacksolveAdjoint": "it solves the adjoint equation backwards through the solver's "
+                        "step, which jrigid's projected solver and flat state do not allow; ",
+    "ImplicitAdjoint": "its derivatives are those of a steady state, not of the motion "
+                       "over ts; ",
+}
+
+
 def solver_options(solver, adjoint, max_steps, dt0, default=None):
     """Defaults and checks of a numerical solve's options: ``(solver, adjoint, dt0, max_steps)``.
 
@@ -222,6 +235,13 @@ def solver_options(solver, adjoint, max_steps, dt0, default=None):
     adjoint = _instance(diffrax.RecursiveCheckpointAdjoint) if adjoint is None else adjoint
     if not isinstance(adjoint, diffrax.AbstractAdjoint):
         raise ValueError(f"adjoint must be a diffrax adjoint, got {adjoint!r}")
+    if not isinstance(adjoint, _ADJOINTS):
+        raise ValueError(
+            f"adjoint={type(adjoint).__name__}() is not supported: "
+            + _UNSUPPORTED.get(type(adjoint).__name__, "")
+            + "use diffrax.RecursiveCheckpointAdjoint() (the default, reverse mode), "
+            "diffrax.DirectAdjoint() or diffrax.ForwardMode() (forward mode)"
+        )
     if (
         isinstance(max_steps, bool)
         or not isinstance(max_steps, (int, np.integer))
