@@ -171,7 +171,7 @@ def test_heavy_top_members_that_are_not_lagrange_tops_get_a_code():
         jax.block_until_ready(jax.vmap(lambda m, c: run(m, c, True).q)(moments, coms))
 
 
-@pytest.mark.parametrize("omega0", [(0.0, 2.0, 0.0), (0.0, -1.5, 0.0), (2.0, 0.0, 0.0)])
+@pytest.mark.parametrize("omega0", [(0.0, -2.0, 0.0), (2.0, 0.0, 0.0)])
 def test_spin_about_a_body_axis_stays_a_spin_with_its_derivatives(omega0):
     """ω0 exactly along a body axis came back from (q, q̇) inside the compiled program as
     (4e-17, 2, 4e-18): about the intermediate axis the closed form then flipped the body
