@@ -290,7 +290,7 @@ def _w(name, data, batch):
 # --------------------------------------------------------------------------- quaternion: two args
 
 
-@case(jq, "multiply", "distance")
+@case(jq, "multiply", "distance", "squared_distance")
 def _two_quats(name, data, batch):
     p, kind_p = draw_quat(data, batch, label="p", max_exp=150)
     q, kind_q = draw_quat(data, batch, kinds=Q_VALID if kind_p not in Q_VALID else Q_KINDS,
@@ -308,8 +308,11 @@ def _two_quats(name, data, batch):
         each_element_non_finite(out, batch)
     else:
         expected = (rot(q).inv() * rot(p)).magnitude().reshape(batch)
-        np.testing.assert_allclose(out, expected, atol=1e-12)
-        np.testing.assert_allclose(jq.distance(p, p), 0.0, atol=1e-12)
+        if name == "squared_distance":  # (an angle's rounding, times up to 2π)
+            np.testing.assert_allclose(out, expected**2, atol=1e-11)
+        else:
+            np.testing.assert_allclose(out, expected, atol=1e-12)
+        np.testing.assert_allclose(f(p, p), 0.0, atol=1e-12)
 
 
 @case(jq, "rotate", "rotate_inverse")

@@ -223,7 +223,8 @@ def solver_options(solver, adjoint, max_steps, dt0, default=None):
     """Defaults and checks of a numerical solve's options: ``(solver, adjoint, dt0, max_steps)``.
 
     ``solver`` defaults to ``default()`` (:data:`DEFAULT_SOLVER`), ``adjoint`` to
-    ``diffrax.RecursiveCheckpointAdjoint()``; ``ValueError`` for a non-diffrax solver, a
+    ``diffrax.RecursiveCheckpointAdjoint()``; ``ValueError`` for a non-diffrax solver, an
+    adjoint other than the recursive-checkpoint, direct or forward-mode one, a
     ``max_steps`` that is not a positive int (``bool`` is refused, NumPy integers are
     accepted, and returned as a Python ``int``: diffrax needs it static) or a concrete
     ``dt0`` that is not finite and positive.
