@@ -138,11 +138,12 @@ def _intervals(scene, ts, dt, variant, y0, steps_bound):
     def interval(carry, i):
         y, steps = carry
         span = ts[i + 1] - ts[i]
-        n = jnp.maximum(jnp.ceil(span / dt - 1e-9), 1.0).astype(jnp.int32)
         if uniform:
             n = jnp.int32(longest)
-        elif longest is not None:  # (equal to the count computed before tracing)
-            n = jnp.minimum(n, longest)
+        else:
+            n = _step_counts(span, dt, jnp).astype(jnp.int32)
+            if longest is not None:  # (equal to the count computed before tracing)
+                n = jnp.minimum(n, longest)
         h = span / n.astype(span.dtype)
 
         def step(k, yk):
@@ -167,9 +168,13 @@ def _steps_bound(ts, dt) -> tuple[int, bool] | None:
     :func:`_intervals` computes them, or ``None`` if ``ts`` or ``dt`` is traced."""
     if isinstance(ts, jax.core.Tracer) or isinstance(dt, jax.core.Tracer):
         return None
-    span, dt = np.diff(np.asarray(ts)), np.asarray(dt)
-    counts = np.maximum(np.ceil(span / dt - 1e-9), 1.0)
+    counts = _step_counts(np.diff(np.asarray(ts)), np.asarray(dt), np)
     return int(counts.max()), bool(counts.min() == counts.max())
+
+
+def _step_counts(span, dt, xnp):
+    """``⌈span/dt⌉`` steps (at least 1) per output interval, with NumPy or JAX (``xnp``)."""
+    return xnp.maximum(xnp.ceil(span / dt - 1e-9), 1.0)
 
 
 def leapfrog(

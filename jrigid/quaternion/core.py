@@ -379,8 +379,7 @@ def distance(p: ArrayLike, q: ArrayLike) -> jax.Array:
     differentiated twice (Newton steps, curvature at a perfect fit) use
     :func:`squared_distance`.
     """
-    p, q = rescale(quaternion_arg(p, "p"))[0], rescale(quaternion_arg(q))[0]
-    return to_axis_angle(multiply(conjugate(q), p))[1]
+    return to_axis_angle(_relative(p, q))[1]
 
 
 def squared_distance(p: ArrayLike, q: ArrayLike) -> jax.Array:
@@ -399,9 +398,15 @@ def squared_distance(p: ArrayLike, q: ArrayLike) -> jax.Array:
     Returns:
         ``(...)`` squared angle in radians², in ``[0, π²]``.
     """
-    p, q = rescale(quaternion_arg(p, "p"))[0], rescale(quaternion_arg(q))[0]
-    r = to_rotvec(multiply(conjugate(q), p))
+    r = to_rotvec(_relative(p, q))
     return dot(r, r)
+
+
+def _relative(p, q) -> jax.Array:
+    """``q* ⊗ p`` of ``p`` and ``q`` rescaled (any finite non-zero norm), the rotation
+    taking ``q`` to ``p`` in the body frame."""
+    p, q = rescale(quaternion_arg(p, "p"))[0], rescale(quaternion_arg(q))[0]
+    return multiply(conjugate(q), p)
 
 
 def slerp(p: ArrayLike, q: ArrayLike, t: ArrayLike) -> jax.Array:
