@@ -12,9 +12,12 @@ dense output; there the velocities jump by an impulse and the integration starts
 The impulse at a contact (Newton restitution with Coulomb friction) is computed by
 :mod:`jrigid.impacts`, whose docstring states the model.
 
-Several points near the floor at once (a box landing on an edge or face) are resolved by
-sequential impulses: the most strongly approaching point within ``contact_tol`` of the
-floor gets its impulse, then the next, until none approaches.
+Several points near the floor at once (a box landing on an edge or face) get their
+impulses together: each point's target is Newton's ``u_n⁺ = −e u_n⁻`` of its own velocity
+before the contact, and sweeps over the points (projected Gauss–Seidel on the accumulated
+impulses, normal parts ``≥ 0``, tangential parts in the friction cone) converge to
+impulses that meet every target at once. A box landing flat leaves the floor at ``e``
+times its speed, without spin.
 
 :func:`simulate_bounces` drives the segments from Python (each segment and each contact
 resolution is one compiled call), so it is not itself ``jit``/``grad``-able; the pure
@@ -49,7 +52,7 @@ from jrigid.formulations import check_scene, get_formulation
 from jrigid.impacts import (  # the impact mechanics, also importable from here
     apply_impulse,
     box_corners,  # noqa: F401
-    collision_matrix,  # noqa: F401
+    collision_matrix,
     contact_impulse,
     effective_mass,  # noqa: F401
     point_positions,
@@ -183,14 +186,10 @@ def _energies(scene, kin):
 
 
 @eqx.filter_jit
-def _resolve(scene, formulation, y, contact_tol, max_iter):
-    """Sequential impulses at the approaching points within ``contact_tol`` of the floor."""
-    floor = _floor(scene)
-    kin = formulation.kinematics(scene, y)
-    q, x, m, moments = kin.q, kin.x, scene.body.mass, scene.body.moments
-    n = jnp.zeros(3, dtype=x.dtype).at[2].set(1.0)
-    r_all = quat.rotate(q[None, :], floor.points)
-    near = (x[2] + r_all[:, 2] - floor.height) <= contact_tol
+def _sequential(m, moments, q, floor, r_all, near, v, omega, max_iter):
+    """One point at the floor: impulses at it until it no longer approaches (one impulse,
+    :func:`jrigid.impacts.contact_impulse`, unless rounding leaves it approaching)."""
+    n = jnp.zeros(3, dtype=v.dtype).at[2].set(1.0)
 
     def approaching(v, omega):
         un = point_velocities(q, omega, v, floor.points)[:, 2]
@@ -207,13 +206,91 @@ def _resolve(scene, formulation, y, contact_tol, max_iter):
         P = contact_impulse(m, moments, q, v, omega, r, n, floor.restitution, floor.friction)
         v2, omega2 = apply_impulse(m, moments, q, v, omega, r, P)
         un2 = point_velocities(q, omega2, v2, floor.points)[k, 2]
-        rec = jnp.concatenate([k[None].astype(x.dtype), un[k][None], un2[None], P])
+        rec = jnp.concatenate([k[None].astype(v.dtype), un[k][None], un2[None], P])
         first = jnp.where(count == 0, rec, first)
         return v2, omega2, count + 1, first, P_sum + P
 
-    first0 = jnp.full(6, jnp.nan, dtype=x.dtype)
-    init = (kin.v, kin.omega, jnp.zeros((), jnp.int32), first0, jnp.zeros(3, x.dtype))
-    v, omega, count, first, P_sum = jax.lax.while_loop(cond, body, init)
+    first0 = jnp.full(6, jnp.nan, dtype=v.dtype)
+    init = (v, omega, jnp.zeros((), jnp.int32), first0, jnp.zeros(3, v.dtype))
+    return jax.lax.while_loop(cond, body, init)
+
+
+def _simultaneous(m, moments, q, floor, r_all, near, v, omega, max_sweeps):
+    """Several points at the floor: their impulses solved together (projected
+    Gauss–Seidel on the accumulated impulses, Catto's sequential impulses).
+
+    Each point's target is Newton's ``u_n⁺ = −e u_n⁻`` of its velocity *before* the
+    contact (a near point that was not approaching: ``u_n⁺ ≥ 0``); sweeps over the points
+    move each one's accumulated impulse toward its target, normal part ``≥ 0``,
+    tangential part within the friction cone ``|P_t| ≤ μ P_n`` (Coulomb, from the point's
+    own ``2 × 2`` block of the collision matrix), until no impulse changes by more than
+    ``eps^¾`` of the largest ``M |u_n⁻|``. A body landing flat on four corners leaves
+    the floor at ``e`` times its speed, without spin; impulses applied one point at a time,
+    each from the velocity the previous ones left, gave an effective ``e`` of 0.26 for
+    0.5 and a tumble."""
+    dtype = v.dtype
+    K = jax.vmap(lambda r: collision_matrix(m, moments, q, r))(r_all)
+    un0 = point_velocities(q, omega, v, floor.points)[:, 2]
+    target = jnp.where(near & (un0 < 0), -floor.restitution * un0, 0.0)
+    scale = m * jnp.max(jnp.where(near, jnp.abs(un0), 0.0))
+    tol = jnp.finfo(dtype).eps ** 0.75 * scale
+
+    def point(k, c):
+        v, omega, lam, change = c
+        r, Kk = r_all[k], K[k]
+        u = v + jnp.cross(quat.rotate(q, omega), r)
+        ln_old = lam[k, 2]
+        ln = jnp.maximum(ln_old + (target[k] - u[2]) / Kk[2, 2], 0.0)
+        u_t = u[:2] + Kk[:2, 2] * (ln - ln_old)
+        a, b, d = Kk[0, 0], Kk[0, 1], Kk[1, 1]
+        det = a * d - b * b
+        lt = lam[k, :2] - jnp.stack([d * u_t[0] - b * u_t[1], a * u_t[1] - b * u_t[0]]) / det
+        norm2 = jnp.sum(lt * lt)
+        cap = floor.friction * ln
+        over = norm2 > cap * cap
+        lt = jnp.where(over, lt * cap / jnp.sqrt(jnp.where(over, norm2, 1.0)), lt)
+        dP = jnp.where(near[k], jnp.concatenate([lt, ln[None]]) - lam[k], 0.0)
+        v, omega = apply_impulse(m, moments, q, v, omega, r, dP)
+        return v, omega, lam.at[k].add(dP), jnp.maximum(change, jnp.max(jnp.abs(dP)))
+
+    def cond(c):
+        return (c[3] > tol) & (c[4] < max_sweeps)
+
+    def sweep(c):
+        v, omega, lam, _, count = c
+        v, omega, lam, change = jax.lax.fori_loop(
+            0, r_all.shape[0], point, (v, omega, lam, jnp.zeros((), dtype)))
+        return v, omega, lam, change, count + 1
+
+    lam0 = jnp.zeros(r_all.shape, dtype)
+    v, omega, lam, _, _ = jax.lax.while_loop(
+        cond, sweep, (v, omega, lam0, jnp.asarray(jnp.inf, dtype), jnp.zeros((), jnp.int32)))
+    k = jnp.argmin(jnp.where(near, un0, jnp.inf))
+    un = point_velocities(q, omega, v, floor.points)[k, 2]
+    first = jnp.concatenate([k[None].astype(dtype), un0[k][None], un[None], lam[k]])
+    count = jnp.sum(jnp.any(lam != 0, axis=-1)).astype(jnp.int32)
+    return v, omega, count, first, jnp.sum(lam, axis=0)
+
+
+def _resolve(scene, formulation, y, contact_tol, max_iter):
+    """The impulses at the points within ``contact_tol`` of the floor: at one point,
+    :func:`_sequential`; at several (points listed twice count once), :func:`_simultaneous`."""
+    floor = _floor(scene)
+    kin = formulation.kinematics(scene, y)
+    q, x, m, moments = kin.q, kin.x, scene.body.mass, scene.body.moments
+    r_all = quat.rotate(q[None, :], floor.points)
+    near = (x[2] + r_all[:, 2] - floor.height) <= contact_tol
+    # a point listed twice (or within rounding of another) is one contact point
+    size = jnp.max(jnp.abs(r_all))
+    same = jnp.all(jnp.abs(r_all[:, None, :] - r_all[None, :, :]) <= 1e-12 * size, axis=-1)
+    earlier = jnp.tril(jnp.ones(same.shape, bool), -1)
+    near = near & ~jnp.any(same & earlier & near[None, :], axis=-1)
+    v, omega, count, first, P_sum = jax.lax.cond(
+        jnp.sum(near) > 1,
+        lambda: _simultaneous(m, moments, q, floor, r_all, near, kin.v, kin.omega,
+                              max(max_iter, 1000)),
+        lambda: _sequential(m, moments, q, floor, r_all, near, kin.v, kin.omega, max_iter),
+    )
     after = type(kin)(q, omega, x, v)
     lowest = jnp.min(x[2] + r_all[:, 2] - floor.height)
     # lift the body out of the floor by the event's tolerance depth (<= contact_tol)
@@ -247,9 +324,12 @@ class BounceRun(NamedTuple):
             a ``"resting"`` stop the body is held still; after ``"max_bounces"`` or
             ``"failed"`` the samples are ``NaN``).
         bounces: dict of numpy arrays, one row per contact: ``t``; ``point`` (index of the
-            first point hit); ``un_before``, ``un_after`` (its normal velocity before and
-            after its own impulse); ``impulse`` ``(B, 3)`` (the first) and
-            ``impulse_total`` ``(B, 3)``; ``impulses`` (how many sequential impulses);
+            first point hit, the one approaching fastest); ``un_before``, ``un_after``
+            (its normal velocity before and after its impulse: at one point its own, at
+            several all of them); ``impulse`` ``(B, 3)`` (the first point's) and
+            ``impulse_total`` ``(B, 3)``; ``impulses`` (at one point, how many impulses
+            it took, one unless rounding left it approaching; at several, how many of
+            them carry an impulse);
             ``energy_before``, ``energy_after`` ``(B, 3)`` = (translational kinetic,
             rotational kinetic, potential); ``momentum_before/after`` ``(B, 3)``;
             ``L_point_before/after`` ``(B, 3)`` angular momentum about the first contact

@@ -359,3 +359,71 @@ def test_frictionless_elastic_impulses_stay_the_frictionless_formula():
     assert np.all(np.isfinite(np.asarray(P)))
     np.testing.assert_allclose(np.asarray(P)[:, 2], expect, rtol=1e-12, atol=1e-15)
     np.testing.assert_array_equal(np.asarray(P)[:, :2], 0.0)
+
+
+def _box_scene(e, mu, size=(1.0, 0.6, 0.4), mass=2.0, g=9.81):
+    from jrigid import impacts
+
+    body = RigidBody(inertia.box(mass, *size), mass)
+    floor = contact.Floor(impacts.box_corners(jnp.array(size)), restitution=e, friction=mu)
+    return Scene(body, FreeFlight(), (Gravity(g), floor)), floor
+
+
+@pytest.mark.parametrize("e, mu", [(0.5, 0.0), (1.0, 0.0), (0.5, 0.4), (0.0, 0.4)])
+def test_a_box_landing_flat_bounces_straight_up_at_e_times_its_speed(e, mu):
+    """Four corners touch at once. By symmetry the total impulse is vertical through the
+    centre of mass: P = M (1 + e) |v|, v⁺ = e |v|, ω⁺ = 0, and every corner leaves at
+    −e u_n. Impulses applied one corner at a time, each from the velocity the previous
+    ones left, gave v⁺ = 0.26 |v| for e = 0.5 and a tumble of up to 5.7 rad/s."""
+    g, mass, size, h = 9.81, 2.0, (1.0, 0.6, 0.4), 1.0
+    scene, floor = _box_scene(e, mu, size, mass, g)
+    state = initial.from_omega(None, (0.0, 0.0, 0.0), x=(0.0, 0.0, size[2] / 2 + h),
+                               v=(0.0, 0.0, 0.0))
+    t_hit = math.sqrt(2 * h / g)
+    t_end = t_hit + 1e-9
+    run = contact.simulate_bounces(scene, state, jnp.array([0.0, t_end]))
+    b = run.bounces
+    assert len(b["t"]) == 1 and b["impulses"][0] == 4
+    v_hit = g * b["t"][0]  # at the contact, which is 1e-10 below the floor
+    np.testing.assert_allclose(b["impulse_total"][0], [0.0, 0.0, mass * (1 + e) * v_hit],
+                               rtol=1e-10, atol=1e-9)
+    tr = run.trajectory
+    v_end = e * v_hit - g * (t_end - b["t"][0])
+    np.testing.assert_allclose(tr.v[-1], [0.0, 0.0, v_end], rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(tr.omega[-1], 0.0, atol=1e-9)
+    u = np.asarray(contact.point_velocities(tr.q[-1], tr.omega[-1], tr.v[-1], floor.points))
+    bottom = np.asarray(floor.points)[:, 2] < 0
+    np.testing.assert_allclose(u[bottom, 2], v_end, rtol=1e-9, atol=1e-9)
+    kinetic_after = np.sum(b["energy_after"][0][:2])
+    assert kinetic_after == pytest.approx(0.5 * mass * (e * v_hit) ** 2, rel=1e-9, abs=1e-12)
+
+
+def test_a_box_landing_on_an_edge_while_sliding():
+    """Two corners touch at once while the box slides: each leaves at −e u_n (no
+    friction), or the pair, with friction, ends within the friction cone and no energy
+    is created."""
+    scene0, floor = _box_scene(0.5, 0.0)
+    q0 = quat.from_axis_angle(jnp.array([1.0, 0.0, 0.0]), jnp.array(0.4))
+    r = np.asarray(quat.rotate(q0[None, :], floor.points))
+    z0 = -np.min(r[:, 2]) + 0.3
+    state = initial.from_omega(q0, (0.0, 0.0, 0.0), x=(0.0, 0.0, z0), v=(1.5, 0.0, 0.0))
+    t_hit = math.sqrt(2 * 0.3 / 9.81)
+    ts = jnp.array([0.0, t_hit + 1e-9])
+    for mu in (0.0, 0.5):
+        scene, floor = _box_scene(0.5, mu)
+        run = contact.simulate_bounces(scene, state, ts)
+        b = run.bounces
+        assert len(b["t"]) == 1 and b["impulses"][0] == 2
+        tr = run.trajectory
+        u = np.asarray(contact.point_velocities(tr.q[-1], tr.omega[-1], tr.v[-1],
+                                                floor.points))
+        hit = np.argsort(np.asarray(quat.rotate(q0[None, :], floor.points))[:, 2])[:2]
+        un_before = -9.81 * b["t"][0]  # the box falls without spin until the contact
+        if mu == 0.0:  # both corners leave at −e u_n (then fall for 1e-9 s)
+            np.testing.assert_allclose(b["un_after"] / b["un_before"], -0.5, rtol=1e-10)
+            np.testing.assert_allclose(u[hit, 2], -0.5 * un_before, rtol=1e-7)
+            assert u[hit[0], 2] == pytest.approx(u[hit[1], 2], rel=1e-12)
+            np.testing.assert_allclose(b["impulse_total"][0][:2], 0.0, atol=1e-12)
+        P = b["impulse_total"][0]
+        assert np.hypot(P[0], P[1]) <= mu * P[2] * (1 + 1e-9)
+        assert np.sum(b["energy_after"][0][:2]) <= np.sum(b["energy_before"][0][:2]) + 1e-12
