@@ -15,9 +15,9 @@ import jax
 import jax.numpy as jnp
 from jax.typing import ArrayLike
 
-from jrigid import exact, initial
+from jrigid import exact, inertia, initial
 from jrigid import quaternion as quat
-from jrigid._checks import is_traced
+from jrigid._checks import as_floats, check_shape, fail_if
 from jrigid.body import RigidBody
 from jrigid.integrate import simulate
 from jrigid.scene import Scene
@@ -27,6 +27,23 @@ __all__ = ["ftle_exact", "ftle_simulate"]
 
 def _log_sigma_max(jac: jax.Array) -> jax.Array:
     return jnp.log(jnp.linalg.svd(jac, compute_uv=False)[0])
+
+
+def _inputs(moments: ArrayLike, omega0: ArrayLike, t: ArrayLike):
+    """``(moments (3,), omega0 (3,), t ())`` as arrays of one floating dtype, checked:
+    a physical inertia, a finite ω0 and a finite horizon ``t > 0`` (``ValueError`` for
+    concrete values, a runtime error under ``jit``)."""
+    moments, omega0, t = as_floats(moments, omega0, t)
+    moments = check_shape(moments, "moments (principal moments)", (3,))
+    omega0 = check_shape(omega0, "omega0 (initial body angular velocity)", (3,))
+    if jnp.ndim(t) != 0:
+        raise ValueError(f"t must be a scalar horizon, got shape {jnp.shape(t)}")
+    moments = inertia.validate(moments, kind="moments")
+    omega0 = fail_if(omega0, ~jnp.all(jnp.isfinite(omega0)), "omega0 must be finite",
+                     lambda: f"omega0 {omega0}")
+    t = fail_if(t, ~(jnp.isfinite(t) & (t > 0)), "t must be a finite horizon > 0",
+                lambda: f"got {t}")
+    return moments, omega0, t
 
 
 def ftle_exact(moments: ArrayLike, omega0: ArrayLike, t: ArrayLike) -> jax.Array:
@@ -48,11 +65,13 @@ def ftle_exact(moments: ArrayLike, omega0: ArrayLike, t: ArrayLike) -> jax.Array
 
     Returns:
         ``()`` FTLE in 1/time.
+
+    Raises:
+        ValueError: (a runtime error under ``jit``) a non-physical inertia (as
+            :func:`ftle_simulate`), a non-finite ``omega0``, or a horizon ``t`` that is
+            not finite and ``> 0``.
     """
-    moments, omega0 = jnp.asarray(moments), jnp.asarray(omega0)
-    t = jnp.asarray(t, dtype=omega0.dtype)
-    if not is_traced(t) and not (t.shape == () and bool(jnp.isfinite(t) & (t > 0))):
-        raise ValueError(f"t must be a finite horizon > 0, got {t}")
+    moments, omega0, t = _inputs(moments, omega0, t)
     q0 = quat.identity(dtype=omega0.dtype)
     # Tie the moments to the traced ω0, so exact.prepare sees a tracer (not a concrete
     # array captured by jit) and skips its concrete-value check.
@@ -91,10 +110,14 @@ def ftle_simulate(
             ``"body_omega"`` integrates Euler's equations alone (ω needs no orientation).
 
     Returns:
-        ``()`` FTLE in 1/time.
+        ``()`` FTLE in 1/time; NaN if the solve failed (``max_steps`` exhausted, the step
+        size collapsed).
+
+    Raises:
+        ValueError: (a runtime error under ``jit``) a non-physical inertia, a non-finite
+            ``omega0``, or a horizon ``t`` that is not finite and ``> 0``.
     """
-    moments, omega0 = jnp.asarray(moments), jnp.asarray(omega0)
-    t = jnp.asarray(t, dtype=omega0.dtype)
+    moments, omega0, t = _inputs(moments, omega0, t)
     scene = Scene(RigidBody(moments))
     ts = jnp.stack([jnp.zeros_like(t), t])
 
@@ -111,6 +134,9 @@ def ftle_simulate(
             formulation=formulation,
             throw=False,
         )
-        return traj.omega[-1]
+        return traj.omega[-1], traj.result
 
-    return _log_sigma_max(jax.jacfwd(final)(omega0)) / t
+    jac, result = jax.jacfwd(final, has_aux=True)(omega0)
+    # a failed solve (step budget, step-size collapse) has no FTLE: NaN, not the -inf of
+    # its zero tangents, which a map would show as the most stable direction of all
+    return jnp.where(result == 0, _log_sigma_max(jac) / t, jnp.nan)

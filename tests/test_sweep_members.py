@@ -238,3 +238,44 @@ def test_an_out_dir_that_cannot_be_created_is_a_value_error(tmp_path):
     with pytest.raises(ValueError, match="cannot be created"):
         ensemble.simulate_many(SCENE, states_of(np.eye(3)), TS, progress=False,
                                out_dir=a_file / "below")
+
+
+def test_resuming_refuses_closures_and_options_that_repr_does_not_tell_apart(tmp_path):
+    """``repr`` shows a long array with an ellipsis, 8 digits of a JAX scalar, and an
+    equinox module's arrays as their shapes: a summary closing over another window, a
+    scene scaled by 3e-9 more, or a SaveAt at other times of the same count came back
+    with the first run's numbers."""
+    states = states_of(np.eye(3)[:2])
+    weights = np.ones(1001)
+
+    def summary_of(w):
+        return lambda t: {"omega": t.omega[-1] * w[500]}
+
+    kwargs = dict(out_dir=tmp_path / "summary", progress=False)
+    ensemble.simulate_many(SCENE, states, TS, summary=summary_of(weights), **kwargs)
+    other = weights.copy()
+    other[500] = 0.0  # repr(other) == repr(weights)
+    assert repr(other) == repr(weights)
+    with pytest.raises(ValueError, match="different run"):
+        ensemble.simulate_many(SCENE, states, TS, summary=summary_of(other), **kwargs)
+
+    def scene_of(scale):
+        return lambda p: Scene(RigidBody(scale * p))
+
+    params = jnp.asarray([[1.0, 2.0, 3.0], [1.0, 2.0, 2.5]])
+    kwargs = dict(params=params, out_dir=tmp_path / "scene", progress=False)
+    ensemble.simulate_many(scene_of(jnp.float64(1.0)), states, TS, **kwargs)
+    with pytest.raises(ValueError, match="different run"):
+        ensemble.simulate_many(scene_of(jnp.float64(1.0 + 3e-9)), states, TS, **kwargs)
+
+
+def test_options_are_fingerprinted_by_their_arrays():
+    import diffrax
+
+    from jrigid.ensemble import many
+
+    a = diffrax.SaveAt(ts=jnp.array([0.5, 1.0]))
+    b = diffrax.SaveAt(ts=jnp.array([1.5, 2.0]))
+    assert many._describe(a) == many._describe(b)  # repr shows f64[2] for both
+    assert many._value_identity(a) != many._value_identity(b)
+    assert many._value_identity(a) == many._value_identity(diffrax.SaveAt(ts=jnp.array([0.5, 1.0])))

@@ -205,7 +205,8 @@ def simulate_many(
     inputs = {"state": states} if params is None else {"state": states, "params": params}
     meta = dict(metadata or {})
     meta["simulate"] = {
-        "kwargs": {k: _describe(v) for k, v in member.kwargs},
+        "kwargs": {k: {"repr": _describe(v), "sha256": _value_identity(v)}
+                   for k, v in member.kwargs},
         "summary": _code_identity(member.summary),
         "scene": None if fixed else _code_identity(scene),
         "shared_step": member.lockstep,
@@ -299,16 +300,40 @@ def _describe(value) -> str:
     return re.sub(r" at 0x[0-9a-fA-F]+", "", repr(value))
 
 
-def _code_identity(fn: Callable) -> dict[str, str]:
+def _value_identity(value, seen: frozenset = frozenset()) -> str:
+    """A SHA-256 of everything in ``value``: its pytree structure (static fields of
+    equinox modules included), each array leaf's dtype, shape and bytes, the code
+    identity of each function in it, and the ``repr`` of any other leaf. (``repr`` alone
+    shows an array of more than 1000 entries with an ellipsis, 8 digits of each entry,
+    and an equinox module's arrays as their shapes only: two different ``SaveAt(ts=...)``
+    would look the same.)"""
+    leaves, treedef = jax.tree_util.tree_flatten(value)
+    h = hashlib.sha256(_describe(treedef).encode())
+    for leaf in leaves:
+        if isinstance(leaf, (np.ndarray, np.generic, jax.Array)):
+            a = np.asarray(leaf)
+            h.update(f"|{a.dtype.str}{a.shape}|".encode())
+            h.update(np.ascontiguousarray(a).tobytes())
+        elif getattr(leaf, "__code__", None) is not None and id(leaf) not in seen:
+            h.update(_code_identity(leaf, seen)["sha256"].encode())
+        else:
+            h.update(f"|{_describe(leaf)}|".encode())
+    return h.hexdigest()
+
+
+def _code_identity(fn: Callable, seen: frozenset = frozenset()) -> dict[str, str]:
     """What tells a function apart in ``meta.json``, across sessions: its qualified name,
     and a SHA-256 of its bytecode (constants and names included; not where it stands in
-    its file) and of the values its closure holds. Two lambdas, or one function edited,
+    its file) and of the values its closure holds (:func:`_value_identity`: every entry
+    of an array). Two lambdas, or one function edited or closing over other values,
     differ; the globals and functions it reads are not included. (A new Python version
     compiles other bytecode: a run stored with another one is not resumed.)"""
     name = f"{getattr(fn, '__module__', '?')}.{getattr(fn, '__qualname__', type(fn).__name__)}"
     code = getattr(fn, "__code__", None)
-    text = _describe(fn) if code is None else _bytecode(code)
-    cells = [_describe(c.cell_contents) for c in getattr(fn, "__closure__", None) or ()]
+    seen = seen | {id(fn)}
+    text = _value_identity(fn, seen) if code is None else _bytecode(code)
+    cells = [_value_identity(c.cell_contents, seen)
+             for c in getattr(fn, "__closure__", None) or ()]
     digest = hashlib.sha256("\n".join([text, *cells]).encode()).hexdigest()
     return {"name": name, "sha256": digest}
 
