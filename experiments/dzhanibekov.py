@@ -76,7 +76,7 @@ def main(
     growth = w * math.sqrt((C - B) * (B - A) / (A * C))  # linearised rate about the middle axis
     numbers = {
         "moments": h["moments"],
-        "intermediate_axis": mid + 1,
+        "intermediate_axis_index": mid,  # 0-based, as theory.flip_theory's axis
         "tilt_deg": tilt_deg,
         "flip_interval_measured": h["flip_interval"],
         "flip_interval_theory": th["flip_interval"],

@@ -57,6 +57,9 @@ def main(
     """
     if shape not in SHAPES:
         raise ValueError(f"shape must be one of {', '.join(SHAPES)}, got {shape!r}")
+    if samples < 3:
+        raise ValueError(
+            f"samples must be >= 3 (central differences need neighbours), got {samples}")
     n = 21 if quick else samples
     axis = np.asarray(axis, dtype=float)
     if axis.shape != (3,) or not np.linalg.norm(axis) > 0:

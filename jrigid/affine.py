@@ -228,13 +228,17 @@ def rotation_3d(q, pivot=None) -> jax.Array:
     """Rotation by the unit quaternion ``q`` (17.9 with the active form of 17.28).
 
     Args:
-        q: ``(..., 4)`` scalar first, body → space.
+        q: ``(..., 4)`` scalar first, body → space; finite and non-zero (any norm: the
+            rotation of ``q / |q|``).
         pivot: optional centre of rotation ``(..., 3)``; default the origin.
 
     Returns:
         ``(..., 4, 4)`` whose upper-left block is ``quaternion.to_matrix(q)``.
+
+    Raises:
+        ValueError: (a runtime error under ``jit``) ``q`` is zero or not finite.
     """
-    R = quat.to_matrix(q)
+    R = quat.to_matrix(quat.check_quaternion(q, unit=False))
     T = from_blocks(R, jnp.zeros(3, dtype=R.dtype))
     return _maybe_about(T, pivot)
 
@@ -243,7 +247,7 @@ def rotation_3d_axis_angle(axis, angle, pivot=None) -> jax.Array:
     """Rotation by ``angle`` about ``axis`` (the Rodrigues matrix 17.17, via quaternions 17.25).
 
     Args:
-        axis: ``(..., 3)``, need not be normalised.
+        axis: ``(..., 3)``, need not be normalised (finite, not zero).
         angle: radians, ``(...)``; right-hand rule about ``axis``.
         pivot: optional point on the rotation axis ``(..., 3)``; default the origin.
 
@@ -252,6 +256,8 @@ def rotation_3d_axis_angle(axis, angle, pivot=None) -> jax.Array:
     """
     axis, angle = as_floats(axis, angle)
     _check_vector3(axis, "axis")
+    axis = fail_if(axis, ~jnp.all(jnp.isfinite(axis), axis=-1) | jnp.all(axis == 0, axis=-1),
+                   "rotation_3d_axis_angle: axis must be finite and not zero")
     return rotation_3d(quat.from_axis_angle(axis, angle), pivot)
 
 
@@ -364,14 +370,38 @@ def inverse(T) -> jax.Array:
 def inverse_rigid(T) -> jax.Array:
     """Closed-form inverse of a rigid transform: ``[[Rᵀ, -Rᵀ d], [0, 1]]`` (Exercise 17.6).
 
-    The linear block is assumed orthogonal and is not checked; use :func:`inverse` otherwise.
-
     Args:
-        T: ``(..., n+1, n+1)`` with orthogonal ``A``.
+        T: ``(..., n+1, n+1)`` with orthogonal ``A`` and last row ``(0, …, 0, 1)``, both
+            to within :func:`jrigid.quaternion.default_atol` of the dtype.
 
     Returns:
         ``(..., n+1, n+1)``.
+
+    Raises:
+        ValueError: (a runtime error under ``jit``) ``T`` is not finite, its linear block
+            is not orthogonal (a scaling or shear: use :func:`inverse`), or its last row
+            is not ``(0, …, 0, 1)`` (a projective matrix).
     """
+    T = as_float(T)
+    n = _dim_of_transform(T)
+    R, d = to_blocks(T)
+    Rt = jnp.swapaxes(R, -1, -2)
+    tol = quat.default_atol(T.dtype)
+    gram = Rt @ R
+    gram_error = jnp.max(jnp.abs(gram - jnp.broadcast_to(jnp.eye(n, dtype=T.dtype), gram.shape)),
+                         axis=(-2, -1))
+    last = T[..., n, :]
+    row_error = jnp.max(jnp.abs(last - jnp.broadcast_to(
+        jnp.eye(1, n + 1, n, dtype=T.dtype)[0], last.shape)), axis=-1)
+    T = fail_if(T, ~jnp.all(jnp.isfinite(T), axis=(-2, -1)),
+                "inverse_rigid: T has non-finite entries")
+    T = fail_if(T, gram_error > tol,
+                f"inverse_rigid: the linear block of T is not orthogonal (|AᵀA − 1| > {tol:g}); "
+                "use affine.inverse for a scaling or shear",
+                lambda: f"largest |AᵀA − 1| {jnp.max(gram_error):.3g}")
+    T = fail_if(T, row_error > tol,
+                "inverse_rigid: the last row of T is not (0, …, 0, 1) (a projective matrix); "
+                "use affine.inverse")
     R, d = to_blocks(T)
     Rt = jnp.swapaxes(R, -1, -2)
     return from_blocks(Rt, -(Rt @ d[..., None])[..., 0])

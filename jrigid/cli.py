@@ -72,7 +72,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="Run the experiment NAME (or every experiment with NAME = all) and write "
         "figures, numbers.json and report.md into its results folder.",
     )
-    p_run.add_argument("name", metavar="NAME", help="experiment name from `jrigid list`, or all")
+    p_run.add_argument("name", metavar="NAME", nargs="?",
+                       help="experiment name from `jrigid list`, or all")
     p_run.add_argument("params", nargs="*", metavar="KEY=VALUE", help=_PARAM_HELP)
     p_run.add_argument(
         "-p", "--param", action="append", default=[], metavar="KEY=VALUE", help="same as KEY=VALUE"
@@ -311,6 +312,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command == "list":
         return _cmd_list(args.verbose)
     if args.command == "run":
+        if args.name is None:
+            args.subparser.error("NAME is required: an experiment from `jrigid list`, or all")
         return _cmd_run(args.subparser, args, args.name)
     if args.command == "docs":
         return _cmd_docs(args.subparser, args)

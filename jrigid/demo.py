@@ -34,6 +34,7 @@ from __future__ import annotations
 import math
 import time
 from pathlib import Path
+from typing import Annotated
 
 import jax
 import jax.numpy as jnp
@@ -42,6 +43,7 @@ import numpy as np
 from jrigid import inertia, initial, viz
 from jrigid import quaternion as quat
 from jrigid.body import RigidBody
+from jrigid.experiment_parameters import POSITIVE
 from jrigid.inertia import t_handle_moments
 from jrigid.integrate import simulate
 from jrigid.report import Report, format_number
@@ -252,14 +254,14 @@ def main(
     out_dir,
     quick: bool = False,
     *,
-    radius: float = 1.0,
-    thickness: float = 0.1,
+    radius: Annotated[float, POSITIVE] = 1.0,
+    thickness: Annotated[float, POSITIVE] = 0.1,
     tilt_deg: float = 10.0,
-    spin_hz: float = 1.0,
+    spin_hz: Annotated[float, POSITIVE] = 1.0,
     handle_tilt_deg: float = 1.0,
-    handle_spin_hz: float = 1.5,
-    frames: int = 90,
-    fps: int = 20,
+    handle_spin_hz: Annotated[float, POSITIVE] = 1.5,
+    frames: Annotated[int, POSITIVE] = 90,
+    fps: Annotated[int, POSITIVE] = 20,
     gif: bool = True,
     compare_exact: bool = True,
 ) -> dict:
@@ -269,18 +271,31 @@ def main(
         out_dir: results folder.
         quick: shorter runs and fewer frames (for tests).
         radius, thickness: the plate's size (mass 1).
-        tilt_deg: angle between the plate's symmetry axis and ``L``.
+        tilt_deg: angle between the plate's symmetry axis and ``L``, in ``(0, 90)``: at 0
+            the wobble is not defined (only the sum of the two rates is).
         spin_hz: the plate's spin ``ω3 / 2π``.
-        handle_tilt_deg: tilt of the T-handle's initial ω from its intermediate axis.
+        handle_tilt_deg: tilt of the T-handle's initial ω from its intermediate axis, in
+            ``(0, 90)``.
         handle_spin_hz: the T-handle's ``|ω| / 2π``.
-        frames, fps: frames per GIF and playback rate.
+        frames, fps: frames per GIF (at least 2) and playback rate (frames per second).
         gif: write the animations.
         compare_exact: compare the T-handle with :mod:`jrigid.exact` when present (its
             compilation takes several seconds; skipped with ``quick``).
 
     Returns:
-        the measured and theoretical numbers (also in ``numbers.json``).
+        the measured and theoretical numbers (also in ``numbers.json``, written before
+        the figures and animations are drawn).
+
+    Raises:
+        ValueError: a tilt outside ``(0, 90)`` degrees, fewer than 2 frames or a
+            non-positive ``fps`` (before anything runs).
     """
+    for name, value in (("tilt_deg", tilt_deg), ("handle_tilt_deg", handle_tilt_deg)):
+        if not 0 < value < 90:
+            raise ValueError(f"{name} must be in (0, 90) degrees, got {value:g}")
+    if frames < 2 or fps <= 0:
+        raise ValueError(f"an animation needs frames >= 2 and fps > 0, got frames={frames}, "
+                         f"fps={fps}")
     start = time.perf_counter()
     n_samples = 401 if quick else 1201  # both runs alike: one compilation
     frames = min(frames, 24) if quick else frames
@@ -314,9 +329,6 @@ def main(
         "integrated by `jrigid.simulate` (quaternion acceleration, DOP853, rtol 1e-10) in "
         f"{dtype}; largest relative energy drift {drift:.1e}."
     )
-    _plate_section(rep, p, radius, thickness, spin_hz, frames, fps, gif)
-    _t_handle_section(rep, h, handle_tilt_deg, handle_spin_hz, frames, fps, gif)
-
     th, meas = p["theory"], p["measured"]
     numbers = {
         "plate": {
@@ -332,7 +344,7 @@ def main(
         },
         "t_handle": {
             "moments": h["moments"],
-            "intermediate_axis": h["mid"] + 1,
+            "intermediate_axis_index": h["mid"],  # 0-based, as theory.flip_theory's axis
             "flip_interval_measured": h["flip_interval"],
             "flip_interval_theory": h["theory"]["flip_interval"],
             "period_theory": h["theory"]["period"],
@@ -344,6 +356,9 @@ def main(
         "dtype": dtype,
         "quick": quick,
     }
+    rep.numbers(numbers)  # the numbers first: drawing is the slow part
+    _plate_section(rep, p, radius, thickness, spin_hz, frames, fps, gif)
+    _t_handle_section(rep, h, handle_tilt_deg, handle_spin_hz, frames, fps, gif)
     seconds = time.perf_counter() - start
     numbers["seconds"] = {"total": seconds, "first_simulation_incl_compile": t_first}
     rep.numbers(numbers)

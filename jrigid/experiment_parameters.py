@@ -212,13 +212,16 @@ def _convert(text: str, default: Any) -> Any:
 
 
 def split_pairs(pairs: Sequence[str]) -> dict[str, str]:
-    """Split ``["a=1", "b=x"]`` into ``{"a": "1", "b": "x"}``; ``ParameterError`` if malformed."""
+    """Split ``["a=1", "b=x"]`` into ``{"a": "1", "b": "x"}``; ``ParameterError`` if malformed
+    or if a key is given twice."""
     out: dict[str, str] = {}
     for pair in pairs:
         key, sep, value = pair.partition("=")
         key = key.strip().replace("-", "_")
         if not sep or not key.isidentifier():
             raise ParameterError(f"parameters are written key=value, got {pair!r}")
+        if key in out:
+            raise ParameterError(f"{key} is given twice ({key}={out[key]} and {pair})")
         out[key] = value
     return out
 

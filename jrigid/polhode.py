@@ -22,7 +22,27 @@ import jax
 import jax.numpy as jnp
 from jax.typing import ArrayLike
 
+from jrigid import inertia
+from jrigid._checks import as_floats, check_shape, fail_if
+
 __all__ = ["encircled_axis", "omega_at_energy", "polhode", "polhode_family"]
+
+
+def _moments(moments: ArrayLike, *, single: bool = False) -> jax.Array:
+    """``moments`` checked: ``(..., 3)`` (``(3,)`` if ``single``), finite and positive."""
+    moments = check_shape(as_floats(moments)[0], "moments (principal moments)", (3,))
+    if single and moments.ndim != 1:
+        raise ValueError("moments must have shape (3,) (one body; vmap for a batch); got "
+                         f"shape {moments.shape}")
+    return inertia.validate(moments, kind="moments", allow_nonphysical=True)
+
+
+def _omega(omega: ArrayLike, name: str, *, single: bool = False) -> jax.Array:
+    omega = check_shape(omega, f"{name} (body angular velocity)", (3,))
+    if single and omega.ndim != 1:
+        raise ValueError(f"{name} must have shape (3,) (one polhode; vmap for a batch); "
+                         f"got shape {omega.shape}")
+    return omega
 
 
 def omega_at_energy(direction: ArrayLike, moments: ArrayLike, energy: ArrayLike) -> jax.Array:
@@ -36,7 +56,11 @@ def omega_at_energy(direction: ArrayLike, moments: ArrayLike, energy: ArrayLike)
     Returns:
         ``(..., 3)`` ``ω = d √(2E / (d·I d))``.
     """
-    d, i, e = jnp.asarray(direction), jnp.asarray(moments), jnp.asarray(energy)
+    i = _moments(moments)
+    d, i, e = as_floats(check_shape(direction, "direction", (3,)), i, energy)
+    d = fail_if(d, jnp.all(d == 0, axis=-1), "direction must not be zero")
+    e = fail_if(e, ~(e >= 0) | ~jnp.isfinite(e), "energy must be finite and >= 0",
+                lambda: f"energy {e}")
     return d * jnp.sqrt(2.0 * e / jnp.sum(i * d * d, axis=-1))[..., None]
 
 
@@ -54,20 +78,20 @@ def encircled_axis(moments: ArrayLike, omega: ArrayLike) -> jax.Array:
     separatrix (``= 0``) the largest is returned.
 
     Args:
-        moments: ``(3,)`` distinct principal moments, any order.
-        omega: ``(3,)`` body angular velocity.
+        moments: ``(..., 3)`` principal moments, any order, positive.
+        omega: ``(..., 3)`` body angular velocity.
 
     Returns:
-        ``()`` int32.
+        ``(...)`` int32 (the broadcast batch shape).
     """
-    i, w = jnp.asarray(moments), jnp.asarray(omega)
-    order = jnp.argsort(i)
-    i_mid = i[order[1]]
-    delta = jnp.sum(i * (i - i_mid) * w * w)
-    return jnp.where(delta >= 0, order[2], order[0]).astype(jnp.int32)
+    i, w = as_floats(_moments(moments), _omega(omega, "omega"))
+    i, w = jnp.broadcast_arrays(i, w)
+    order = jnp.argsort(i, axis=-1)
+    i_mid = jnp.take_along_axis(i, order[..., 1:2], axis=-1)
+    delta = jnp.sum(i * (i - i_mid) * w * w, axis=-1)
+    return jnp.where(delta >= 0, order[..., 2], order[..., 0]).astype(jnp.int32)
 
 
-@functools.partial(jax.jit, static_argnames=("n",))
 def polhode(moments: ArrayLike, omega0: ArrayLike, n: int = 200) -> jax.Array:
     """The polhode through ``omega0``: ``n`` points of ``{ω·Iω = 2E, |Iω|² = L²}``.
 
@@ -75,24 +99,39 @@ def polhode(moments: ArrayLike, omega0: ArrayLike, n: int = 200) -> jax.Array:
     eliminating ``ω_c`` from the two quadrics leaves the ellipse
     ``I_a(I_c−I_a) ω_a² + I_b(I_c−I_b) ω_b² = 2E I_c − L²``, parametrised
     ``ω_a = A cos φ``, ``ω_b = B sin φ``; then ``ω_c = σ √((2E − I_a ω_a² − I_b ω_b²)/I_c)``
-    with ``σ = sign ω0_c``. Closed curve, ``φ ∈ [0, 2π]`` (first point = last).
+    with ``σ = sign ω0_c``. Closed curve, ``φ ∈ [0, 2π]`` (first point = last). A steady
+    rotation (``ω0`` along a principal axis, or any ``ω0`` of a spherical body, or of a
+    symmetric one in its equatorial plane) has the single point ``ω0`` as its polhode,
+    repeated ``n`` times.
 
     Args:
-        moments: ``(3,)`` distinct principal moments.
+        moments: ``(3,)`` principal moments (positive; ``vmap`` for a batch).
         omega0: ``(3,)`` a point of the polhode (body angular velocity).
-        n: static number of points.
+        n: static number of points (``>= 2``).
 
     Returns:
         ``(n, 3)`` body angular velocities on both surfaces.
     """
-    i, w = jnp.asarray(moments), jnp.asarray(omega0)
+    if not isinstance(n, int) or isinstance(n, bool) or n < 2:
+        raise ValueError(f"n must be an int >= 2, got {n!r}")
+    i = _moments(moments, single=True)
+    i, w = as_floats(i, _omega(omega0, "omega0", single=True))
+    return _polhode(i, w, n)
+
+
+@functools.partial(jax.jit, static_argnames=("n",))
+def _polhode(i: jax.Array, w: jax.Array, n: int) -> jax.Array:
     two_e, l2 = _invariants(i, w)
     c = encircled_axis(i, w)
     a, b = (c + 1) % 3, (c + 2) % 3
     ia, ib, ic = i[a], i[b], i[c]
     rhs = two_e * ic - l2
-    amp_a = jnp.sqrt(jnp.maximum(rhs / (ia * (ic - ia)), 0.0))
-    amp_b = jnp.sqrt(jnp.maximum(rhs / (ib * (ic - ib)), 0.0))
+    # I_a = I_c or I_b = I_c only for a steady rotation (a sphere; a symmetric body spun
+    # in the plane of its two equal moments, which are then the largest and encircled)
+    den_a, den_b = ia * (ic - ia), ib * (ic - ib)
+    steady = (den_a == 0) | (den_b == 0)
+    amp_a = jnp.sqrt(jnp.maximum(rhs / jnp.where(steady, 1.0, den_a), 0.0))
+    amp_b = jnp.sqrt(jnp.maximum(rhs / jnp.where(steady, 1.0, den_b), 0.0))
     phi = jnp.linspace(0.0, 2.0 * math.pi, n, dtype=w.dtype)
     wa, wb = amp_a * jnp.cos(phi), amp_b * jnp.sin(phi)
     sigma = jnp.where(w[c] >= 0, 1.0, -1.0)
@@ -100,10 +139,9 @@ def polhode(moments: ArrayLike, omega0: ArrayLike, n: int = 200) -> jax.Array:
     cols = jnp.stack([wa, wb, wc], axis=-1)  # columns for axes a, b, c
     perm = jnp.stack([a, b, c])
     inv = jnp.argsort(perm)
-    return cols[:, inv]
+    return jnp.where(steady, w, cols[:, inv])
 
 
-@functools.partial(jax.jit, static_argnames=("levels", "n"))
 def polhode_family(moments: ArrayLike, levels: int = 7, n: int = 200) -> jax.Array:
     """Polhodes at unit energy for drawing, with the separatrix.
 
@@ -113,7 +151,7 @@ def polhode_family(moments: ArrayLike, levels: int = 7, n: int = 200) -> jax.Arr
     and the largest axis, and the crossing itself; each seed and its negative.
 
     Args:
-        moments: ``(3,)`` distinct principal moments (any order).
+        moments: ``(3,)`` principal moments (any order, positive, not all equal).
         levels: static number of polhodes per side of the separatrix.
         n: static number of points per curve.
 
@@ -122,7 +160,19 @@ def polhode_family(moments: ArrayLike, levels: int = 7, n: int = 200) -> jax.Arr
         ``2 levels`` and ``4 levels + 1`` are the separatrix (two arcs each, meeting at
         ``±`` the intermediate axis).
     """
-    i = jnp.asarray(moments)
+    if not isinstance(levels, int) or isinstance(levels, bool) or levels < 1:
+        raise ValueError(f"levels must be an int >= 1, got {levels!r}")
+    if not isinstance(n, int) or isinstance(n, bool) or n < 2:
+        raise ValueError(f"n must be an int >= 2, got {n!r}")
+    i = _moments(moments, single=True)
+    i = fail_if(i, (i[0] == i[1]) & (i[1] == i[2]),
+                "moments must not all be equal: a spherical body has no polhodes (every "
+                "rotation is steady)")
+    return _family(i, levels, n)
+
+
+@functools.partial(jax.jit, static_argnames=("levels", "n"))
+def _family(i: jax.Array, levels: int, n: int) -> jax.Array:
     order = jnp.argsort(i)
     lo, hi = order[0], order[2]
     i1, i2, i3 = i[lo], i[order[1]], i[hi]
@@ -136,4 +186,4 @@ def polhode_family(moments: ArrayLike, levels: int = 7, n: int = 200) -> jax.Arr
     seeds = omega_at_energy(
         seeds, jnp.broadcast_to(i, seeds.shape), jnp.full(seeds.shape[:1], 0.5, i.dtype)
     )
-    return jax.vmap(lambda w: polhode(i, w, n))(seeds)
+    return jax.vmap(lambda w: _polhode(i, w, n))(seeds)

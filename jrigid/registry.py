@@ -260,7 +260,9 @@ def run(
         quick: pass ``quick=True`` (a short run).
         params: parameter name -> text or value, converted by :func:`parse_params`.
 
-    Also writes ``run.json`` (name, parameters, quick, wall time) into ``out_dir``.
+    Also writes ``run.json`` into ``out_dir``: name, parameters, quick, and ``status``,
+    ``"running"`` from the start (a folder whose run was interrupted says so), then
+    ``"finished"`` with the wall time, or ``"failed"`` with the error.
     """
     exp = get(name)
     typed = parse_params(name, exp.main, params or {})
@@ -271,19 +273,23 @@ def run(
     if quick and not takes_quick:
         print(f"note: experiment {name!r} has no quick mode; running it in full", file=sys.stderr)
     kwargs = {"quick": quick} if takes_quick else {}
-    start = time.perf_counter()
-    result = exp.main(out, **kwargs, **typed)
-    seconds = time.perf_counter() - start
-    _fallback_outputs(out, name, result)
     from jrigid import __version__
     from jrigid.report import to_jsonable
 
-    meta = {
-        "experiment": name,
-        "params": to_jsonable(typed),
-        "quick": quick,
-        "seconds": round(seconds, 3),
-        "jrigid_version": __version__,
-    }
-    (out / "run.json").write_text(json.dumps(meta, indent=2) + "\n")
+    meta = {"experiment": name, "params": to_jsonable(typed), "quick": quick,
+            "jrigid_version": __version__}
+
+    def record(**status):
+        (out / "run.json").write_text(json.dumps({**meta, **status}, indent=2) + "\n")
+
+    record(status="running")
+    start = time.perf_counter()
+    try:
+        result = exp.main(out, **kwargs, **typed)
+    except BaseException as e:  # Ctrl-C included: the folder must not look finished
+        record(status="failed", error=f"{type(e).__name__}: {e}")
+        raise
+    seconds = time.perf_counter() - start
+    _fallback_outputs(out, name, result)
+    record(status="finished", seconds=round(seconds, 3))
     return result

@@ -129,11 +129,11 @@ def flips_expected(moments: ArrayLike, omega: ArrayLike) -> jax.Array:
     per period of ω. This is the classification a long enough simulation must reproduce.
 
     Args:
-        moments: ``(3,)`` distinct principal moments.
-        omega: ``(3,)`` body angular velocity.
+        moments: ``(..., 3)`` distinct principal moments.
+        omega: ``(..., 3)`` body angular velocity.
 
     Returns:
-        ``()`` bool.
+        ``(...)`` bool (the broadcast batch shape).
     """
     return nearest_axis(omega) != encircled_axis(moments, omega)
 

@@ -204,6 +204,35 @@ def test_inverse_rigid_closed_form(seed):
     np.testing.assert_allclose(affine.inverse_rigid(T2), np.linalg.inv(T2), atol=1e-14)
 
 
+def test_inverse_rigid_refuses_what_is_not_rigid():
+    """A scaling, a shear or a projective matrix has no transpose inverse: refused, where
+    the closed form would return diag(2, 2, 1) for the inverse of diag(2, 2, 1)."""
+    with pytest.raises(ValueError, match="not orthogonal"):
+        affine.inverse_rigid(affine.scaling(jnp.array([2.0, 2.0])))
+    with pytest.raises(ValueError, match="not orthogonal"):
+        affine.inverse_rigid(affine.shear_2d(0.3))
+    projective = jnp.array([[1.0, 0, 0], [0, 1, 0], [1, 0, 1]])
+    with pytest.raises(ValueError, match="last row"):
+        affine.inverse_rigid(projective)
+    with pytest.raises(ValueError, match="non-finite"):
+        affine.inverse_rigid(jnp.full((4, 4), jnp.nan))
+    with pytest.raises(Exception, match="not orthogonal"):
+        jax.jit(affine.inverse_rigid)(affine.scaling(jnp.array([2.0, 2.0]))).block_until_ready()
+
+
+def test_rotations_refuse_a_zero_quaternion_or_axis():
+    with pytest.raises(ValueError, match="zero quaternion"):
+        affine.rotation_3d(jnp.zeros(4))
+    with pytest.raises(ValueError, match="non-finite"):
+        affine.rotation_3d(jnp.array([jnp.nan, 0.0, 0.0, 1.0]))
+    with pytest.raises(ValueError, match="axis must be finite and not zero"):
+        affine.rotation_3d_axis_angle(jnp.zeros(3), 0.3)
+    # any other scale is the rotation of q/|q| (scipy)
+    q = jnp.array([2.0, 0.4, -0.2, 1.0])
+    expected = Rotation.from_quat(np.roll(np.asarray(q), -1)).as_matrix()
+    np.testing.assert_allclose(affine.rotation_3d(q)[:3, :3], expected, atol=1e-14)
+
+
 def test_inverse_of_projective_matrix():
     T = np.eye(4)
     T[3, 2] = -1.0  # w' = -z: a perspective division

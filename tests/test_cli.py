@@ -109,6 +109,10 @@ def test_unknown_experiment_exits_2_and_lists_valid_names(capsys):
         (["run", "hello", "quick=true"], "set with --quick"),
         (["demo", "gif=maybe"], "expected a bool"),
         (["run", "all", "rate=1"], "cannot be given with `run all`"),
+        (["run", "hello", "rate=1", "rate=2"], "rate is given twice"),
+        (["run"], "NAME is required"),
+        (["demo", "fps=0"], "parameter 'fps'"),
+        (["demo", "frames=-3"], "parameter 'frames'"),
     ],
 )
 def test_bad_parameters_exit_2_and_say_what_is_valid(argv, message, capsys):
@@ -152,6 +156,21 @@ def test_a_value_the_experiment_refuses_exits_2_with_one_line(capsys, tmp_path):
                             str(tmp_path)], capsys)
     assert code == 2 and "refused its parameters (sides=1,-2,3)" in err
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["demo", "tilt_deg=0"], "tilt_deg must be in (0, 90)"),
+    (["demo", "frames=1"], "frames >= 2"),
+    (["run", "hello", "samples=0"], "samples must be >= 3"),
+])
+def test_values_the_demo_and_hello_refuse_are_refused_before_running(argv, message, capsys,
+                                                                     tmp_path):
+    """fps=0 used to end in a ZeroDivisionError after the whole simulation, tilt_deg=0 in
+    a 100 % disagreement with theory, samples=0 in numpy's message."""
+    code, err = _exit_code([*argv, "--out", str(tmp_path)], capsys)
+    assert code == 2 and message in err and "Traceback" not in err
+    assert not (tmp_path / "numbers.json").exists()
+    assert json.loads((tmp_path / "run.json").read_text())["status"] == "failed"
 
 
 def test_parameters_declared_positive_are_refused_unless_positive(tmp_path, monkeypatch):
@@ -281,6 +300,7 @@ def test_run_folder_experiment_with_typed_params_and_fallback_outputs(tmp_path, 
     assert "| n | 7 |" in report
     run = json.loads((out / "run.json").read_text())
     assert run["experiment"] == "counter" and run["params"]["n"] == 7
+    assert run["status"] == "finished" and run["seconds"] >= 0
     assert f"report: {out / 'report.md'}" in capsys.readouterr().out
 
 
@@ -301,6 +321,9 @@ def test_run_all_runs_everything_and_reports_failures(tmp_path, capsys, exp_dir,
     assert [n for n, _ in ran] == list(registry.discover())
     assert all(q for _, q in ran)
     assert (tmp_path / "counter" / "numbers.json").exists()
+    # a failed run says so in its folder (it used to keep the previous run's run.json)
+    broken = json.loads((tmp_path / "broken" / "run.json").read_text())
+    assert broken["status"] == "failed" and "ZeroDivisionError" in broken["error"]
 
 
 def test_experiment_without_quick_mode_runs_in_full(tmp_path, capsys, exp_dir):

@@ -314,3 +314,60 @@ def test_stability_bodies_quick_flip_period(results):
     assert num["max_rel_error_simulated_vs_exact"] < 1e-5
     assert 1.7 < num["asymptotic_error_slope_vs_log_eps"] < 2.3
     assert num["max_rel_error_asymptotic_vs_exact"]["0.001"] < 1e-4
+
+
+def test_encircled_axis_and_flips_expected_per_member():
+    """A batch of ω gives one axis per member (the closed form L² − 2E I_mid of each)."""
+    moments = jnp.array([1.0, 2.0, 3.0])
+    omegas = jnp.array([[1.0, 0.0, 0.1], [0.1, 0.0, 1.0], [0.1, 1.0, 0.05]])
+    axes = stability.encircled_axis(moments, omegas)
+    np.testing.assert_array_equal(axes, [int(stability.encircled_axis(moments, w))
+                                         for w in omegas])
+    np.testing.assert_array_equal(axes, [0, 2, 0])  # L² − 2E I_mid: −0.99, 3.0, −0.0025
+    np.testing.assert_array_equal(stability.flips_expected(moments, omegas),
+                                  [False, False, True])
+    with pytest.raises(ValueError, match="omega"):
+        stability.encircled_axis(moments, jnp.ones(2))
+
+
+def test_polhode_of_a_steady_rotation_is_its_point():
+    """A sphere, or a symmetric body spun in the plane of its two largest (equal) moments,
+    rotates steadily: the polhode is ω0 itself, not NaN."""
+    for moments, w in (([1.0, 1.0, 1.0], [1.0, 0.3, 0.2]), ([1.0, 2.0, 2.0], [0.0, 0.3, 0.2])):
+        curve = stability.polhode(jnp.array(moments), jnp.array(w), n=5)
+        np.testing.assert_array_equal(curve, np.broadcast_to(w, (5, 3)))
+
+
+def test_polhode_inputs_are_checked():
+    good = jnp.array([1.0, 2.0, 3.0])
+    w = jnp.array([1.0, 0.3, 0.2])
+    with pytest.raises(ValueError, match="moments"):
+        stability.polhode(jnp.array([1.0, 2.0]), w[:2])
+    with pytest.raises(ValueError, match="one polhode"):
+        stability.polhode(good, jnp.stack([w, w]))
+    with pytest.raises(ValueError, match="not positive definite"):
+        stability.polhode(jnp.array([-1.0, 2.0, 3.0]), w)
+    with pytest.raises(ValueError, match="n must be"):
+        stability.polhode(good, w, n=1)
+    with pytest.raises(ValueError, match="spherical"):
+        stability.polhode_family(jnp.ones(3))
+    with pytest.raises(ValueError, match="direction must not be zero"):
+        stability.omega_at_energy(jnp.zeros(3), good, 1.0)
+    with pytest.raises(ValueError, match="energy"):
+        stability.omega_at_energy(w, good, -1.0)
+
+
+def test_ftle_of_a_failed_solve_is_nan_and_bad_horizons_are_refused():
+    """A solve out of steps gave FTLE = -inf (its zero tangents): the most stable direction
+    on a map. A horizon t <= 0 gave ±inf."""
+    moments, w = jnp.array([1.0, 2.0, 3.0]), jnp.array([0.1, 1.0, 0.05])
+    assert np.isnan(float(stability.ftle_simulate(moments, w, 10.0, max_steps=5)))
+    for f in (stability.ftle_simulate, stability.ftle_exact):
+        for t in (0.0, -10.0, float("nan")):
+            with pytest.raises(ValueError, match="t must be a finite horizon"):
+                f(moments, w, t)
+        with pytest.raises(ValueError, match="triangle inequality"):
+            f(jnp.array([1.0, 2.0, 4.0]), w, 1.0)
+    # an integer ω0 no longer truncates the horizon (0.5 became 0)
+    assert float(stability.ftle_exact(moments, jnp.array([0, 1, 0]), 0.5)) == pytest.approx(
+        float(stability.ftle_exact(moments, jnp.array([0.0, 1.0, 0.0]), 0.5)))

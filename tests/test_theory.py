@@ -315,9 +315,10 @@ def test_zero_crossings_interpolate_and_differentiate():
     ts = jnp.linspace(0.0, 10.0, 2001)
     expected = [math.pi, 2 * math.pi, 3 * math.pi]
     np.testing.assert_allclose(theory.zero_crossings(ts, jnp.sin(ts)), expected, atol=1e-5)
-    # d t*/d shift of sin(t − s) is 1 for every crossing
+    # d t*/d shift of sin(t − s) is 1 for every crossing; at s = 0.5 there are four, the
+    # first on the sample t = 0.5, where sin(t − s) is exactly zero
     grad = jax.grad(lambda s: jnp.sum(theory.zero_crossings(ts, jnp.sin(ts - s))))(0.5)
-    assert float(grad) == pytest.approx(3.0, rel=1e-4)
+    assert float(grad) == pytest.approx(4.0, rel=1e-4)
 
 
 def test_viz_wrappers_return_numpy_from_the_theory_functions():
@@ -329,3 +330,83 @@ def test_viz_wrappers_return_numpy_from_the_theory_functions():
     direct = theory.axis_angles(q, jnp.array([0.0, 0.0, 1.0]))
     np.testing.assert_array_equal(ang, np.asarray(direct))
     assert isinstance(viz_angles.fit_rate(ts, ang[:, 0]), float)
+
+
+def test_gyroscope_rates_for_either_sense_of_spin():
+    """A top spinning the other way (ω3 < 0) has the same roots, negated (the quadratic's
+    roots from numpy), and the slow one is still the one near M g l / (I3 ω3)."""
+    i1, i3, mgl, theta = 1.0, 0.5, 1.0, 1.0
+    for omega3 in (20.0, -20.0, 3.0, -3.0):
+        r = theory.gyroscope_rates(i1, i3, mgl, theta, omega3)
+        roots = np.roots([i1 * math.cos(theta), -i3 * omega3, mgl])
+        slow, fast = sorted(roots, key=abs)
+        assert float(r["slow"]) == pytest.approx(slow, rel=1e-12)
+        assert float(r["fast"]) == pytest.approx(fast, rel=1e-12)
+        assert np.sign(float(r["slow"])) == np.sign(omega3)
+
+
+def test_zero_crossings_through_exact_zeros():
+    ts = jnp.arange(7.0)
+    # a crossing on a sample, a touch, a run of zeros, a zero at the end
+    x = jnp.array([1.0, 0.0, -1.0, 0.0, -2.0, 0.0, 0.0])
+    np.testing.assert_array_equal(theory.zero_crossings(ts[:3], x[:3]), [1.0])
+    np.testing.assert_array_equal(theory.zero_crossings(ts, x), [1.0])
+    x = jnp.array([1.0, 0.0, 0.0, 0.0, -1.0, 2.0, 2.0])
+    np.testing.assert_allclose(theory.zero_crossings(ts, x), [2.0, 4 + 1 / 3])
+    # sin sampled so that every crossing is a sample, after rounding
+    ts = jnp.linspace(0.0, 2 * math.pi, 9)
+    np.testing.assert_allclose(theory.zero_crossings(ts, jnp.round(jnp.sin(ts), 12)),
+                               [math.pi], atol=1e-12)
+    # the crossing on a zero sample moves with the sample after it, as the interpolation
+    grad = jax.grad(lambda v: jnp.sum(theory.zero_crossings(
+        jnp.arange(3.0), jnp.array([1.0, v, -1.0]))))(0.0)
+    assert float(grad) == pytest.approx(1.0)  # t* = 1 + v for v near 0
+    with pytest.raises(ValueError, match="x must be finite"):
+        theory.zero_crossings(jnp.arange(3.0), jnp.array([1.0, jnp.nan, -1.0]))
+    with pytest.raises(ValueError, match=r"shape \(T,\)"):
+        theory.zero_crossings(jnp.arange(3.0), jnp.ones((3, 2)))
+
+
+def test_flip_theory_on_a_batch_is_each_member():
+    moments = np.array([1.0, 2.0, 3.0])
+    omegas = np.array([[0.01, 1.0, 0.0], [0.1, 1.0, 0.05], [1.0, 0.1, 0.2]])
+    batch = theory.flip_theory(moments, omegas)
+    for k, w in enumerate(omegas):
+        one = theory.flip_theory(moments, w)
+        for key in ("flip_interval", "period", "m1", "axis"):
+            assert float(batch[key][k]) == pytest.approx(float(one[key]), rel=1e-14)
+    # each flip interval against the closed form's ω period
+    np.testing.assert_allclose(batch["period"],
+                               [float(theory.free_rates(moments, w).omega_period) for w in omegas],
+                               rtol=1e-12)
+    # batched bodies, in any order of the moments
+    bodies = np.array([[1.0, 2.0, 3.0], [3.0, 1.0, 2.0]])
+    both = theory.flip_interval(bodies, np.array([[0.01, 1.0, 0.0], [0.0, 0.01, 1.0]]))
+    assert float(both[1]) == pytest.approx(float(both[0]), rel=1e-14)
+    t, lam, c = theory.flip_interval_asymptotic(bodies, 1.0, 0.01)
+    assert t.shape == (2,) and float(t[1]) == pytest.approx(float(t[0]), rel=1e-14)
+
+
+@pytest.mark.parametrize("call", [
+    lambda m: theory.flip_interval(m, [0.01, 1.0]),
+    lambda m: theory.plate_theory(m, [0.3, 0.1]),
+    lambda m: theory.body_precession_rate(m, [0.3, 0.1]),
+    lambda m: theory.flip_interval_asymptotic(m, 1.0, 0.01),
+])
+def test_closed_forms_refuse_two_moments_or_negative_ones(call):
+    with pytest.raises(ValueError, match=r"moments.*\(\.\.\., 3\)"):
+        call([1.0, 2.0])
+    with pytest.raises(ValueError, match="not positive definite|shape"):
+        call([-1.0, 1.0, 2.0])
+
+
+def test_symmetric_body_formulas_refuse_an_asymmetric_body():
+    """plate_theory and body_precession_rate hold for I1 = I2 only: for (1, 2, 3) the
+    plate's ratio would be 1.50 where the exact rates give 2.01."""
+    for f in (theory.plate_theory, theory.body_precession_rate):
+        with pytest.raises(ValueError, match="I1 = I2"):
+            f([1.0, 2.0, 3.0], [0.3, 0.1, 2.0])
+        f([1.0, 1.0 + 1e-12, 2.0], [0.3, 0.1, 2.0])  # equal to rounding: accepted
+    with pytest.raises(Exception, match="I1 = I2"):
+        jax.jit(theory.body_precession_rate)(jnp.array([1.0, 2.0, 3.0]),
+                                             jnp.array([0.3, 0.1, 2.0])).block_until_ready()

@@ -174,14 +174,15 @@ def validate(inertia, *, allow_nonphysical: bool = False, kind: str | None = Non
     kind = _kind(inertia, kind)
     if is_traced(inertia):
         return check(inertia, allow_nonphysical=allow_nonphysical, kind=kind, rtol=rtol)
-    for name, bad, label, values in _conditions(inertia, kind, allow_nonphysical, rtol):
-        if bool(jnp.any(bad)):
-            where = ""
-            if bad.ndim:
-                idx = tuple(int(i) for i in jnp.argwhere(bad)[0])
-                values = values[idx]
-                where = f" at batch index {idx}"
-            raise ValueError(f"inertia is not valid: {name}{where}; {label} {values}")
+    with jax.ensure_compile_time_eval():  # concrete even inside an enclosing jit
+        for name, bad, label, values in _conditions(inertia, kind, allow_nonphysical, rtol):
+            if bool(jnp.any(bad)):
+                where = ""
+                if bad.ndim:
+                    idx = tuple(int(i) for i in jnp.argwhere(bad)[0])
+                    values = values[idx]
+                    where = f" at batch index {idx}"
+                raise ValueError(f"inertia is not valid: {name}{where}; {label} {values}")
     return inertia
 
 

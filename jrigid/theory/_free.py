@@ -11,8 +11,8 @@ import jax
 import jax.numpy as jnp
 from jax.typing import ArrayLike
 
-from jrigid import exact, special
-from jrigid._checks import as_floats
+from jrigid import exact, inertia, special
+from jrigid._checks import as_floats, check_shape, fail_if
 
 __all__ = [
     "FreeRates",
@@ -26,6 +26,23 @@ __all__ = [
 ]
 
 _TWO_PI = 2.0 * math.pi
+
+
+def _body(moments: ArrayLike, omega: ArrayLike, *, symmetric: bool = False):
+    """``moments`` and ``omega`` as float arrays, checked: each ``(..., 3)``, the moments
+    finite and positive and, if ``symmetric``, with ``I1 = I2`` (to ``√eps`` relative)."""
+    moments, omega = as_floats(moments, omega)
+    moments = check_shape(moments, "moments (principal moments)", (3,))
+    omega = check_shape(omega, "omega (body angular velocity)", (3,))
+    moments = inertia.validate(moments, kind="moments", allow_nonphysical=True)
+    if symmetric:
+        i1, i2 = moments[..., 0], moments[..., 1]
+        tol = math.sqrt(jnp.finfo(moments.dtype).eps)
+        moments = fail_if(
+            moments, jnp.abs(i1 - i2) > tol * jnp.maximum(i1, i2),
+            "moments must have I1 = I2 (a body symmetric about axis 3); free_rates gives "
+            "the rates of any body", lambda: f"moments {moments}")
+    return moments, omega
 
 
 def _safe(ok, x):
@@ -51,7 +68,7 @@ def body_precession_rate(moments: ArrayLike, omega: ArrayLike) -> jax.Array:
         >>> print(f"{float(theory.body_precession_rate([1.0, 1.0, 2.0], [0.3, 0.0, 2.0])):.3f}")
         2.000
     """
-    moments, omega = as_floats(moments, omega)
+    moments, omega = _body(moments, omega, symmetric=True)
     return (moments[..., 2] / moments[..., 0] - 1.0) * omega[..., 2]
 
 
@@ -79,7 +96,7 @@ def plate_theory(moments: ArrayLike, omega: ArrayLike) -> dict:
         >>> print(f"{float(th['ratio']):.4f} {float(th['precession_rate']):.4f}")
         2.0000 6.0000
     """
-    moments, omega = as_floats(moments, omega)
+    moments, omega = _body(moments, omega, symmetric=True)
     i1, i3, w3 = moments[..., 0], moments[..., 2], omega[..., 2]
     lnorm = jnp.linalg.norm(moments * omega, axis=-1)
     theta = jnp.arccos(i3 * w3 / lnorm)
@@ -216,12 +233,13 @@ def flip_theory(moments: ArrayLike, omega: ArrayLike) -> dict:
     closed-form motion.
 
     Args:
-        moments: ``(3,)`` distinct principal moments (any order).
-        omega: ``(3,)`` body angular velocity at any instant.
+        moments: ``(..., 3)`` distinct principal moments (any order), positive.
+        omega: ``(..., 3)`` body angular velocity at any instant.
 
     Returns:
-        dict of ``()`` arrays: ``flip_interval``, ``period``, ``m``, ``m1`` (``1 − m``),
-        ``lam`` and ``axis`` (index of the intermediate axis).
+        dict of ``(...)`` arrays (the broadcast batch shape): ``flip_interval``,
+        ``period``, ``m``, ``m1`` (``1 − m``), ``lam`` and ``axis`` (index of the
+        intermediate axis).
 
     Example:
         >>> import math
@@ -231,10 +249,13 @@ def flip_theory(moments: ArrayLike, omega: ArrayLike) -> dict:
         >>> print(th["axis"], f"{float(th['flip_interval']):.4f}")
         1 18.8519
     """
-    moments, omega = as_floats(moments, omega)
-    order = jnp.argsort(jax.lax.stop_gradient(moments))
-    big_a, big_b, big_c = (moments[order[k]] for k in range(3))
-    wa, wb, wc = (omega[order[k]] for k in range(3))
+    moments, omega = _body(moments, omega)
+    moments, omega = jnp.broadcast_arrays(moments, omega)
+    order = jnp.argsort(jax.lax.stop_gradient(moments), axis=-1)
+    moments = jnp.take_along_axis(moments, order, axis=-1)
+    omega = jnp.take_along_axis(omega, order, axis=-1)
+    big_a, big_b, big_c = (moments[..., k] for k in range(3))
+    wa, wb, wc = (omega[..., k] for k in range(3))
     # exact differences, free of cancellation
     l2_2eb = big_a * (big_a - big_b) * wa**2 + big_c * (big_c - big_b) * wc**2  # L² − 2EB
     l2_2ea = big_b * (big_b - big_a) * wb**2 + big_c * (big_c - big_a) * wc**2  # L² − 2EA
@@ -251,7 +272,7 @@ def flip_theory(moments: ArrayLike, omega: ArrayLike) -> dict:
         m=1.0 - m1,
         m1=m1,
         lam=lam,
-        axis=order[1],
+        axis=order[..., 1],
     )
 
 
@@ -259,11 +280,11 @@ def flip_interval(moments: ArrayLike, omega: ArrayLike) -> jax.Array:
     """``2K(m)/λ``, the time between flips of a body spun near its intermediate axis.
 
     Args:
-        moments: ``(3,)`` distinct principal moments (any order).
-        omega: ``(3,)`` body angular velocity at any instant.
+        moments: ``(..., 3)`` distinct principal moments (any order), positive.
+        omega: ``(..., 3)`` body angular velocity at any instant.
 
     Returns:
-        ``()`` array; :func:`flip_theory` has the formulas and the other constants.
+        ``(...)`` array; :func:`flip_theory` has the formulas and the other constants.
 
     Example:
         >>> from jrigid import theory
@@ -291,13 +312,14 @@ def flip_interval_asymptotic(
         C = 4 √(I2(I3−I2)/(I1(I3−I1)))   (toward the smallest).
 
     Args:
-        moments: ``(3,)`` distinct principal moments, any order.
-        speed: ``()`` ``|ω|``.
+        moments: ``(..., 3)`` distinct principal moments, any order, positive.
+        speed: ``(...)`` ``|ω|``.
         eps: ``(...)`` tilt angle(s) in radians.
         toward: ``"largest"`` or ``"smallest"`` (static).
 
     Returns:
-        ``(T, λ, C)``: ``T`` of the shape of ``eps``, ``λ`` and ``C`` scalars.
+        ``(T, λ, C)``: ``T`` of the broadcast shape of the moments' batch, ``speed`` and
+        ``eps``; ``λ`` of the moments' batch and ``speed``; ``C`` of the moments' batch.
 
     Example:
         >>> from jrigid import theory
@@ -307,11 +329,14 @@ def flip_interval_asymptotic(
     """
     if toward not in ("largest", "smallest"):
         raise ValueError(f"toward must be 'largest' or 'smallest', got {toward!r}")
-    s = jnp.sort(jnp.asarray(moments))
-    i1, i2, i3 = s[0], s[1], s[2]
-    lam = jnp.asarray(speed) * jnp.sqrt((i3 - i2) * (i2 - i1) / (i1 * i3))
+    moments, speed, eps = as_floats(moments, speed, eps)
+    moments = check_shape(moments, "moments (principal moments)", (3,))
+    moments = inertia.validate(moments, kind="moments", allow_nonphysical=True)
+    s = jnp.sort(moments, axis=-1)
+    i1, i2, i3 = s[..., 0], s[..., 1], s[..., 2]
+    lam = speed * jnp.sqrt((i3 - i2) * (i2 - i1) / (i1 * i3))
     if toward == "largest":
         const = 4.0 * jnp.sqrt(i2 * (i2 - i1) / (i3 * (i3 - i1)))
     else:
         const = 4.0 * jnp.sqrt(i2 * (i3 - i2) / (i1 * (i3 - i1)))
-    return 2.0 / lam * jnp.log(const / jnp.asarray(eps)), lam, const
+    return 2.0 / lam * jnp.log(const / eps), lam, const

@@ -33,7 +33,8 @@ def gyroscope_rates(
         omega3: ``(...)`` spin ``ω3`` about the axle.
 
     Returns:
-        dict of ``(...)`` arrays: ``slow``, ``fast`` (the exact roots; NaN where the top
+        dict of ``(...)`` arrays: ``slow``, ``fast`` (the exact roots, the slow one the
+        nearer to zero, both of the sign of ``ω3`` for an upright top; NaN where the top
         spins too slowly to precess steadily) and ``slow_approx``, ``fast_approx``.
 
     Example:
@@ -45,9 +46,10 @@ def gyroscope_rates(
     i1, i3, mgl, theta, omega3 = as_floats(i1, i3, mgl, theta, omega3)
     a, b = i1 * jnp.cos(theta), i3 * omega3
     disc = jnp.sqrt(b * b - 4.0 * a * mgl)
+    big = b + jnp.where(b < 0, -disc, disc)  # no cancellation, for either sense of spin
     return dict(
-        slow=2.0 * mgl / (b + disc),
-        fast=(b + disc) / (2.0 * a),
+        slow=2.0 * mgl / big,
+        fast=big / (2.0 * a),
         slow_approx=mgl / b,
         fast_approx=b / a,
     )

@@ -133,8 +133,13 @@ def write_animation(
         the paths written.
 
     Raises:
-        ValueError: unknown extension, or ``.mp4`` requested without ffmpeg.
+        ValueError: ``fps`` not a positive finite number, fewer than 2 frames, unknown
+            extension, or ``.mp4`` requested without ffmpeg (before any frame is drawn).
     """
+    if isinstance(fps, bool) or not np.isfinite(np.asarray(fps, float)) or not fps > 0:
+        raise ValueError(f"fps must be a positive number, got {fps!r}")
+    if n_frames < 2:
+        raise ValueError(f"an animation needs at least 2 frames, got {n_frames}")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     dpi = fig.dpi if dpi is None else dpi
