@@ -5,7 +5,7 @@ bodies (``I1 ≤ I2 ≤ I3 ≤ I1 + I2``), kept a little away from its symmetric
 spun at ``|ω| = 1`` about its intermediate axis tilted by ``ε`` toward the largest or the
 smallest axis, and the time between flips (mean spacing of the sign changes of ``ω2``) is
 
-* measured on a :func:`jrigid.simulate` solve (Tsit5, tight tolerance) run through
+* measured on a :func:`jrigid.simulate` solve (the default solver, tight tolerance) run through
   :func:`jrigid.ensemble.run`, members grouped by their closed-form flip time;
 * compared with the exact half-period ``2K(m)/λ_m`` of :func:`jrigid.exact.omega_period`;
 * and with the separatrix asymptote (:func:`jrigid.theory.flip_interval_asymptotic`)
@@ -33,6 +33,7 @@ import numpy as np
 
 from jrigid import ensemble, exact, initial, stability, theory, viz
 from jrigid.body import RigidBody
+from jrigid.ensemble import storage
 from jrigid.integrate import simulate
 from jrigid.report import Report
 from jrigid.scene import Scene
@@ -175,7 +176,9 @@ def main(
         member,
         inputs,
         chunk_size=chunk,
-        out_dir=Path(out_dir) / "chunks",
+        out_dir=storage.folder_for(Path(out_dir) / "chunks",
+                                   dict(rtol=rtol, samples=samples, half_periods=half_periods,
+                                        chunk=chunk, rows=n_rows)),
         metadata=dict(rtol=rtol, samples=samples, half_periods=half_periods),
         info=info,
     )
@@ -246,7 +249,8 @@ def main(
     rep = Report(Path(out_dir), title="Flip period over bodies and tilts")
     rep.text(
         f"{len(bodies)} bodies × {len(eps_list)} tilts × 2 sides = {len(rows)} simulations "
-        f"(Tsit5, rtol {rtol:g}). The measured time between flips matches the exact "
+        f"(jrigid's default solver, rtol {rtol:g}). The measured time between flips matches "
+        "the exact "
         f"half-period 2K(m)/λ to {numbers['max_rel_error_simulated_vs_exact']:.1e} (relative, "
         f"worst case). The asymptote (2/λ) ln(C/ε) is off by at most "
         + ", ".join(

@@ -3,7 +3,7 @@
 For every direction ``d`` of a Fibonacci lattice on the sphere (10⁴ directions; 300 in
 quick mode) the box (sides ``a, b, c``, :func:`jrigid.inertia.box`) is spun torque free
 with ``ω(0) = |ω| d`` (or, with ``mode="energy"``, at a fixed kinetic energy), simulated
-with :func:`jrigid.simulate` (Tsit5, ``rtol`` 1e-8) over 50 rotation periods
+with :func:`jrigid.simulate` (its default solver, ``rtol`` 1e-8) over 50 rotation periods
 ``2π/|ω|``, and three numbers are kept (:func:`jrigid.stability.map_member`):
 
 * the largest angle the principal axis nearest to ``ω(0)`` moves from its initial
@@ -17,9 +17,10 @@ A direction counts as *unstable* if its nearest axis flips at least once. The cl
 predicts which directions must flip (the nearest axis is not the one the polhode
 encircles, :func:`jrigid.stability.flips_expected`): the map is checked against it, and the
 FTLE is summarised in caps of 15° about each axis. The members run through
-:func:`jrigid.ensemble.run` in chunks written under ``out_dir/chunks`` (an interrupted map
-resumes), ordered by a closed-form difficulty proxy, ``|L|²`` (see
-``benchmarks/lockstep.py``), so that members of a chunk need similar step counts.
+:func:`jrigid.ensemble.run` in chunks written under ``out_dir/chunks/<settings>`` (an
+interrupted map resumes; other parameters start their own folder), ordered by a
+closed-form difficulty proxy, ``|L|²`` (see ``benchmarks/lockstep.py``), so that
+members of a chunk need similar step counts.
 
 Run it with ``jrigid run stability_map [--quick]`` or ``python experiments/stability_map.py``.
 """
@@ -34,6 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jrigid import ensemble, inertia, stability
+from jrigid.ensemble import storage
 from jrigid.report import Report
 from jrigid.viz import stability as vs
 
@@ -84,10 +86,11 @@ def main(
     """Map principal-axis stability over the sphere of spin directions.
 
     Args:
-        out_dir: results folder (chunks in ``out_dir/chunks``).
+        out_dir: results folder (chunks in ``out_dir/chunks/<settings>``: one folder per
+            set of parameters, so a run with other parameters starts its own sweep).
         quick: 300 directions, 20 periods, chunks of 100.
         sides: box side lengths ``a, b, c`` (unit mass).
-        n_directions: Fibonacci directions.
+        n_directions: Fibonacci directions (at least 200).
         mode: ``"speed"`` (``|ω| = 1``) or ``"energy"`` (``2E = I_mid``, so ``|ω| = 1``
             along the middle axis).
         periods: simulated time in rotation periods ``2π``.
@@ -107,6 +110,9 @@ def main(
     """
     if mode not in ("speed", "energy"):
         raise ValueError(f"mode must be 'speed' or 'energy', got {mode!r}")
+    if n_directions < 200 and not quick:  # a 15° cap holds 1.7 % of the sphere
+        raise ValueError(f"n_directions must be >= 200, so that each 15° cap about an axis "
+                         f"holds directions; got {n_directions}")
     if quick:
         n_directions, periods, chunk_size = 300, min(periods, 20.0), 100
     moments = jnp.asarray(inertia.box(1.0, *sides))
@@ -130,11 +136,13 @@ def main(
     proxy = jnp.sum((moments[None, :] * omega0) ** 2, axis=-1)  # |L|², see benchmarks/lockstep.py
     order = np.asarray(stability.difficulty_order(proxy)) if sort else np.arange(n_directions)
     info: dict = {}
+    settings = dict(sides=list(sides), mode=mode, periods=periods, rtol=rtol,
+                    samples_per_period=samples_per_period, ftle_periods=ftle_periods,
+                    sort=sort)
+    chunks = storage.folder_for(Path(out_dir) / "chunks",
+                                dict(settings, n_directions=n_directions, chunk_size=chunk_size))
     with ensemble.executor(workers=workers, scheduler=scheduler) as pool:
-        out = _sweep(member, omega0, order, chunk_size, Path(out_dir) / "chunks", info, pool,
-                     dict(sides=list(sides), mode=mode, periods=periods, rtol=rtol,
-                          samples_per_period=samples_per_period, ftle_periods=ftle_periods,
-                          sort=sort))
+        out = _sweep(member, omega0, order, chunk_size, chunks, info, pool, settings)
 
     d = np.asarray(dirs)
     unstable = out["flips"] > 0
@@ -180,7 +188,8 @@ def main(
     rep.text(
         f"A box of sides {list(sides)} (moments {np.round(mom, 4).tolist()}; smallest axis "
         f"{lo + 1}, intermediate {mid + 1}, largest {hi + 1}) spun along {n_directions} "
-        f"directions ({mode} fixed), {periods:g} rotation periods, Tsit5 at rtol {rtol:g}. "
+        f"directions ({mode} fixed), {periods:g} rotation periods, jrigid's default solver "
+        f"at rtol {rtol:g}. "
         f"{100 * numbers['fraction_unstable']:.1f}% of the directions flip their nearest axis "
         f"(closed form: {100 * numbers['fraction_unstable_closed_form']:.1f}%; agreement "
         f"{100 * numbers['classification_agreement']:.2f}%). Within {CAP_DEG:g}° of the "

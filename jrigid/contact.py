@@ -139,14 +139,19 @@ def _lowest(scene, formulation, y):
     return jnp.min(point_positions(kin.q, kin.x, floor.points)[:, 2]) - floor.height
 
 
+#: The step counts of a segment's ``diffrax`` solve, summed over the segments.
+_STEP_COUNTS = ("num_steps", "num_accepted_steps", "num_rejected_steps")
+
+
 @eqx.filter_jit
 def _segment(scene, formulation, solver, y0, t0, t1, rtol, atol, dt0, depth, max_steps):
     """Integrate from ``t0`` until ``t1`` or the next contact: the lowest point crossing
     ``depth`` below the floor downwards (``depth > 0`` keeps the start, on the floor,
     strictly above the event level).
 
-    Returns ``(t_end, y_end, code, interpolation, num_steps)`` with ``code`` 0 (reached
-    ``t1``), 1 (contact) or a :class:`~jrigid.trajectory.Result` failure code + 10.
+    Returns ``(t_end, y_end, code, interpolation, counts)`` with ``counts (3,)`` the
+    solve's :data:`_STEP_COUNTS` and ``code`` 0 (reached ``t1``), 1 (contact) or a
+    :class:`~jrigid.trajectory.Result` failure code + 10.
     """
     eps = jnp.finfo(t0.dtype).eps
     # the bisection stops when the bracket is below root_atol + rtol |t| and
@@ -170,7 +175,8 @@ def _segment(scene, formulation, solver, y0, t0, t1, rtol, atol, dt0, depth, max
     failure = classify(sol.result, formulation, scene, y1, sol.ts[-1], sol.ys, t1 - t0,
                        nonfinite_trials=steps.nonfinite_trials(sol.controller_state))
     code = jnp.where(sol.result == R.successful, 0, jnp.where(hit, 1, 10 + failure))
-    return sol.ts[-1], y1, code, sol.interpolation, sol.stats["num_steps"]
+    counts = jnp.stack([sol.stats[k] for k in _STEP_COUNTS])
+    return sol.ts[-1], y1, code, sol.interpolation, counts
 
 
 @eqx.filter_jit
@@ -438,13 +444,14 @@ def simulate_bounces(
     tol = jnp.asarray(contact_tol, dtype)
     ts_np = np.asarray(ts)
     ys = jax.tree_util.tree_map(lambda a: np.full((len(ts_np),) + a.shape, np.nan, a.dtype), y)
-    rows, status, rapid, last, steps, dropped, grazes = [], "t_end", 0, -np.inf, 0, 0.0, 0
+    rows, status, rapid, last, dropped, grazes = [], "t_end", 0, -np.inf, 0.0, 0
+    counts = np.zeros(len(_STEP_COUNTS), np.int64)
     failure = Result.solver_failure
     while True:
-        t_hit, y_hit, code, interp, n_steps = _segment(
+        t_hit, y_hit, code, interp, n_counts = _segment(
             scene, formulation, solver, y, t, t1, rtol, atol, dt0, tol, max_steps
         )
-        steps += int(n_steps)
+        counts += np.asarray(n_counts)
         t_hit_f = float(t_hit)
         mask = (ts_np >= float(t)) & (ts_np <= t_hit_f)
         if mask.any():
@@ -490,7 +497,8 @@ def simulate_bounces(
             status = "max_bounces"
             break
     t_stop = float(t1) if status == "t_end" else float(t)
-    stats = dict(num_steps=jnp.asarray(steps))
+    steps = int(counts[0])
+    stats = {k: jnp.asarray(int(n)) for k, n in zip(_STEP_COUNTS, counts, strict=True)}
     ys = jax.tree_util.tree_map(jnp.asarray, ys)
     traj = Trajectory.build(
         scene, formulation, ts, ys, stats=stats,

@@ -553,7 +553,8 @@ def simulate(
         traj, cause, messages = splitting.solve(
             scene, state, ts, rtol, atol, formulation, solver, bound
         )
-        return raise_on_failure(traj, throw, ts, rtol, atol, bound, messages, cause)
+        return raise_on_failure(traj, throw, ts, rtol, atol, bound, messages, cause,
+                                splitting.CAUSES)
     if isinstance(solver, str):
         if solver != "exact":
             raise ValueError(

@@ -14,9 +14,10 @@ renormalised. Written as kick–drift–kick:
 3. ``L_{n+1} = L_½ + ½Δt N(t_{n+1})`` (one corrector pass, so torques that depend on
    ω keep the order).
 
-Each output interval ``[ts[i], ts[i+1]]`` is cut into ``⌈Δ/dt⌉`` equal steps. The loop
-has a traced trip count: forward-mode differentiation works, reverse mode does not (use
-:func:`jrigid.simulate` for gradients).
+Each output interval ``[ts[i], ts[i+1]]`` is cut into ``⌈Δ/dt⌉`` equal steps. With
+``ts`` and ``dt`` concrete the loops have fixed lengths and both forward and reverse mode
+(``jax.grad``) work; with either traced the trip counts are computed in the program and
+only forward mode works (see :func:`leapfrog`).
 """
 
 from __future__ import annotations

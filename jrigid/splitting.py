@@ -67,7 +67,17 @@ from jrigid.solve import finish_sampled, input_checks, normalised, screen
 from jrigid.state import Kinematics, State
 from jrigid.trajectory import Result
 
-__all__ = ["COMPOSITIONS", "Composition", "Splitting", "check_scene", "solve"]
+__all__ = ["CAUSES", "COMPOSITIONS", "Composition", "Splitting", "check_scene", "solve"]
+
+#: The failure texts that differ from the adaptive solver's
+#: (:data:`jrigid.trajectory.CAUSES`): the step bound is per output interval and the
+#: splitting's own, and it has no tolerances.
+CAUSES = {
+    Result.max_steps: (
+        "an output interval needs more than Splitting(max_steps={max_steps}) steps of its dt",
+        "raise the Splitting's max_steps or dt, or add output times in the long interval",
+    ),
+}
 
 
 class Composition(NamedTuple):

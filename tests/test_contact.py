@@ -427,3 +427,13 @@ def test_a_box_landing_on_an_edge_while_sliding():
         P = b["impulse_total"][0]
         assert np.hypot(P[0], P[1]) <= mu * P[2] * (1 + 1e-9)
         assert np.sum(b["energy_after"][0][:2]) <= np.sum(b["energy_before"][0][:2]) + 1e-12
+
+
+def test_bounce_trajectories_count_their_steps_as_simulate_does():
+    """Only num_steps was there; Trajectory documents the accepted and rejected counts."""
+    scene = ball_scene(0.5, 0.5, 9.81)
+    state = initial.from_omega(None, (0.0, 0.0, 0.0), x=(0.0, 0.0, 2.0), v=(0.0, 0.0, 0.0))
+    run = contact.simulate_bounces(scene, state, jnp.linspace(0.0, 1.0, 5))
+    stats = {k: int(v) for k, v in run.trajectory.stats.items()}
+    assert stats["num_steps"] == run.num_steps > 0
+    assert stats["num_accepted_steps"] + stats["num_rejected_steps"] == stats["num_steps"]

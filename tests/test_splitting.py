@@ -278,8 +278,14 @@ def test_too_many_steps_is_a_result_code_and_an_error():
     assert np.all(np.isfinite(np.asarray(traj.q[:60])))
     assert np.all(np.isnan(np.asarray(traj.q[60:])))
     assert int(traj.stats["num_steps"]) == 59 * 3
-    with pytest.raises(SimulationError, match="max_steps"):
+    # the splitting's own bound and remedy, not the adaptive solver's (which quoted
+    # rtol/atol, which a splitting ignores, and simulate's max_steps)
+    with pytest.raises(SimulationError, match=r"output interval needs more than "
+                       r"Splitting\(max_steps=\d+\).*raise the Splitting's") as info:
         simulate(SYMMETRIC, state, ts, solver=solver)
+    assert "rtol" not in str(info.value)
+    with pytest.raises(Exception, match="Splitting's max_steps"):
+        jax.jit(lambda s: simulate(SYMMETRIC, s, ts, solver=solver).q)(state).block_until_ready()
 
 
 def test_invalid_input_names_the_problem():

@@ -279,3 +279,26 @@ def test_options_are_fingerprinted_by_their_arrays():
     assert many._describe(a) == many._describe(b)  # repr shows f64[2] for both
     assert many._value_identity(a) != many._value_identity(b)
     assert many._value_identity(a) == many._value_identity(diffrax.SaveAt(ts=jnp.array([0.5, 1.0])))
+
+
+def test_float32_sweeps_warn_as_simulate_does(float32):
+    """simulate warned that float32 cannot resolve t = 3000 to rtol; the sweeps, whose
+    members ended 7e-4 rad off, did not."""
+    from jrigid import PrecisionWarning
+
+    scene = Scene(RigidBody(jnp.asarray([1.0, 2.0, 3.0])))
+    states = jax.vmap(lambda w: initial.from_omega(None, w))(
+        jnp.asarray([[1.0, 0.3, 0.2], [0.1, 2.0, 0.3]]))
+    ts = np.array([0.0, 3000.0], np.float32)
+    with pytest.warns(PrecisionWarning, match="float32 resolves times"):
+        ensemble.simulate_many(scene, states, ts, progress=False, max_steps=4)
+    with pytest.warns(PrecisionWarning, match="float32 resolves times"):
+        ensemble.simulate_lockstep(scene, states, ts, max_steps=4, throw=False)
+
+
+def test_a_grid_of_states_is_named_as_states():
+    """A (2, 3) grid was blamed on `initial_states` / `initial_state.q` with jax.vmap
+    advice that does not apply to simulate_many."""
+    grid = jax.vmap(states_of)(jnp.ones((2, 3, 3)))
+    with pytest.raises(ValueError, match=r"states must have one leading member axis.*\(2, 3, 4\)"):
+        ensemble.simulate_many(SCENE, grid, TS, progress=False)

@@ -465,3 +465,30 @@ def test_import_jrigid_does_not_import_matplotlib_and_viz_leaves_pyplot_alone():
         "assert 'matplotlib.pyplot' not in sys.modules, 'pyplot imported by jrigid.viz'\n"
     )
     subprocess.run([sys.executable, "-c", code], check=True, timeout=120)
+
+
+def test_stability_drawings_need_one_value_per_direction():
+    """Too many values were drawn from the first N, too few ended in an IndexError, an
+    (N, 1) column in matplotlib's shape message."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from jrigid import stability
+    from jrigid.viz import stability as vs
+
+    dirs = np.asarray(stability.fibonacci_sphere(50))
+    moments = np.array([1.0, 2.0, 3.0])
+    fig = plt.figure()
+    try:
+        ax_map = fig.add_subplot(1, 2, 1, projection="mollweide")
+        ax_globe = fig.add_subplot(1, 2, 2)
+        vs.draw_map(ax_map, dirs, dirs[:, 0], moments, resolution=8)
+        vs.draw_globe(ax_globe, dirs, dirs[:, 0], moments, resolution=8)
+        for bad in (np.ones(60), np.ones(40), np.ones((50, 1))):
+            for draw, ax in ((vs.draw_map, ax_map), (vs.draw_globe, ax_globe)):
+                with pytest.raises(ValueError, match=r"values must have shape \(N,\) = \(50,\)"):
+                    draw(ax, dirs, bad, moments, resolution=8)
+    finally:
+        plt.close(fig)

@@ -170,14 +170,18 @@ fig
 #
 # - **Several devices on one machine.** `devices=None` (the default) splits every chunk
 #   over all of `jax.devices()`: all GPUs of the host, or `K` CPU devices with
-#   `XLA_FLAGS=--xla_force_host_platform_device_count=K` set before JAX is imported. The
-#   results are bit-identical to one device.
-# - **A shared step for throughput.** `simulate_many(..., shared_step=True)` integrates
-#   each device's share of a chunk as one system with one adaptive step
+#   `XLA_FLAGS=--xla_force_host_platform_device_count=K` set before JAX is imported.
+#   With `shared_step=False` the results are bit-identical to one device; with the
+#   default shared step (below) each device's share is one group, so the groups, and the
+#   results to within the tolerance (6e-11 at the default rtol with 2 devices), depend
+#   on the device count.
+# - **A shared step for throughput (the default).** `simulate_many` integrates each
+#   device's share of a chunk as one system with one adaptive step
 #   (`ensemble.simulate_lockstep`): on a CPU, where per-member step control costs more
 #   than a rigid body's vector field, several times the throughput (see the
 #   [benchmarks](../../benchmarks/#throughput-of-a-stability-map)), at the price that a
-#   member's result depends (within tolerance) on its group.
+#   member's result depends (within tolerance) on its group. `shared_step=False` gives
+#   every member its own step control.
 # - **Several hosts, one mesh.** Start the same script on every host, call
 #   `jax.distributed.initialize()` first, and make the same `simulate_many` call with the
 #   same inputs: `jax.devices()` is then global, each chunk is split over every device of

@@ -42,7 +42,14 @@ from jax.typing import ArrayLike
 from jrigid.formulations import AbstractFormulation, check_scene, get_formulation
 from jrigid.invariants import Invariants
 from jrigid.scene import Scene
-from jrigid.solve.inputs import input_checks, normalised, prepare, screen, validate_shared
+from jrigid.solve.inputs import (
+    input_checks,
+    normalised,
+    prepare,
+    screen,
+    validate_shared,
+    warn_precision,
+)
 from jrigid.solve.outcome import finish, raise_on_failure
 from jrigid.solve.stepping import (
     controller,
@@ -239,6 +246,7 @@ def simulate_lockstep(
         out_axes=(0, None, None, None)
     )(scene, initial_states)
     validate_shared(ts, rtol, atol, dtype)  # every member's: not blamed on one
+    warn_precision(states, ts, rtol)  # float32 only, judged by the fastest member
     check_scene(formulation, scene)
     project = bool(project) and formulation.carries_quaternion
     traj, cause, messages = _solve(scene, states, ts, rtol, atol, dt0, formulation, solver,

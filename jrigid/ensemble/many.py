@@ -34,7 +34,7 @@ from jrigid.ensemble.runner import run
 from jrigid.formulations import get_formulation
 from jrigid.integrate import simulate
 from jrigid.scene import Scene
-from jrigid.solve import check_dt0, validate_shared
+from jrigid.solve import check_dt0, default_tolerances, validate_shared, warn_precision
 from jrigid.state import State
 from jrigid.trajectory import Result, Trajectory
 
@@ -166,6 +166,11 @@ def simulate_many(
     """
     if not isinstance(states, State):
         raise ValueError(f"states must be a jrigid State with a leading axis, got {type(states)}")
+    if np.ndim(states.q) != 2:
+        raise ValueError(
+            "states must have one leading member axis (q of shape (N, 4)), got q of shape "
+            f"{np.shape(states.q)}; for a grid of members, flatten it first, e.g. "
+            "jax.tree_util.tree_map(lambda a: a.reshape((-1,) + a.shape[2:]), states)")
     if isinstance(scene, Scene):
         if params is not None:
             raise ValueError("params is only used when scene is a function params -> Scene")
@@ -182,6 +187,9 @@ def simulate_many(
     # bad one is an error and not N invalid members.
     validate_shared(ts, kwargs.get("rtol"), kwargs.get("atol"), ts.dtype)
     check_dt0(kwargs.get("dt0"))
+    rtol = kwargs.get("rtol")
+    rtol = default_tolerances(ts.dtype)[0] if rtol is None else rtol
+    warn_precision(states, ts, np.asarray(rtol, ts.dtype))  # float32 only, the fastest member
     if isinstance(scene, Scene) and np.shape(scene.body.moments) != (3,):
         raise ValueError(
             f"scene has a member axis (body.moments has shape {np.shape(scene.body.moments)}):"

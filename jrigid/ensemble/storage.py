@@ -36,6 +36,7 @@ __all__ = [
     "CHUNK_PATTERN",
     "META_NAME",
     "chunk_path",
+    "folder_for",
     "fingerprint",
     "load_chunk",
     "lock",
@@ -84,6 +85,15 @@ def fingerprint(named_leaves: list[tuple[str, np.ndarray]]) -> str:
         h.update(f"{name}|{leaf.dtype.str}|{leaf.shape}\n".encode())
         h.update(np.ascontiguousarray(leaf).tobytes())
     return h.hexdigest()
+
+
+def folder_for(base: str | os.PathLike, settings: dict) -> pathlib.Path:
+    """``base / <12 hex digits of the settings' SHA-256>``: one chunk folder per set of
+    settings, so that an experiment run again with other parameters starts its own
+    sweep (and resumes its own after an interruption) instead of finding another run's
+    chunks. ``settings`` must be JSON-serialisable (sorted keys)."""
+    text = json.dumps(settings, sort_keys=True, default=str)
+    return pathlib.Path(base) / hashlib.sha256(text.encode()).hexdigest()[:12]
 
 
 def structure(treedef) -> np.ndarray:

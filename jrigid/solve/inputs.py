@@ -251,7 +251,8 @@ def precision_problem(state: State, ts, rtol) -> str | None:
     only concrete ones: under ``jit``/``vmap`` there are no values to look at.
 
     Args:
-        state: the initial :class:`~jrigid.state.State` (``q (4,)``, ``qdot (4,)``).
+        state: the initial :class:`~jrigid.state.State` (``q (..., 4)``, ``qdot (..., 4)``:
+            a batch is judged by its fastest member).
         ts: ``(T,)`` output times.
         rtol: ``()`` relative tolerance; its dtype is the solve's.
 
@@ -265,8 +266,9 @@ def precision_problem(state: State, ts, rtol) -> str | None:
         np.asarray(a, np.float64) for a in jax.device_get((state.q, state.qdot, ts, rtol))
     )
     eps = float(jnp.finfo(dtype).eps)
-    with np.errstate(all="ignore"):
-        rate = 2.0 * np.linalg.norm(qdot) / np.linalg.norm(q)  # |ω| (|q ⊗ q̇| = |q| |q̇|)
+    with np.errstate(all="ignore"):  # |ω| (|q ⊗ q̇| = |q| |q̇|), the largest of a batch
+        rates = 2.0 * np.linalg.norm(qdot, axis=-1) / np.linalg.norm(q, axis=-1)
+        rate = float(np.max(rates, initial=0.0, where=np.isfinite(rates)))
     horizon = max(abs(ts[0]), abs(ts[-1]))
     floor = rate * horizon * eps
     if not (np.isfinite(floor) and floor > rtol) or rtol < 10 * eps:  # (else refused)

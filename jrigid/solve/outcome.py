@@ -157,20 +157,24 @@ _FINE = frozenset({int(Result.success), int(Result.event)})
 
 
 def raise_on_failure(traj: Trajectory, throw: bool, ts, rtol, atol, max_steps: int,
-                     messages=None, cause=None):
+                     messages=None, cause=None, causes=None):
     """Apply ``throw`` (see :func:`jrigid.simulate`) to a solved trajectory.
 
     Concrete results: ``ValueError`` for an invalid input (``messages[cause]``),
     :class:`~jrigid.trajectory.SimulationError` for a failed integration (for a batch:
     its first failed member, with the count). Traced results: one
     ``equinox.branched_error_if`` whose message is the cause first, then the remedy.
-    ``throw=False`` returns ``traj`` as it is.
+    ``throw=False`` returns ``traj`` as it is. ``causes``: ``Result -> (cause, remedy)``
+    texts that replace those of :data:`~jrigid.trajectory.CAUSES` (a fixed-step solver's
+    step bound is not the adaptive solver's, and its tolerances are not quoted then).
     """
     if not throw:
         return traj
+    tolerances = causes is None
+    causes = {**CAUSES, **(causes or {})}
     if isinstance(traj.result, jax.core.Tracer):
         texts = [""] * len(Result)
-        for k, cause_text, remedy in ((k, *CAUSES[k]) for k in Result if k.failed):
+        for k, cause_text, remedy in ((k, *causes[k]) for k in Result if k.failed):
             texts[k] = (
                 f"jrigid.simulate failed: {cause_text.format(max_steps=max_steps)}; "
                 f"{remedy}. (Under vmap, pass throw=False for per-member result codes.)"
@@ -204,12 +208,13 @@ def raise_on_failure(traj: Trajectory, throw: bool, ts, rtol, atol, max_steps: i
     member = traj
     if codes.ndim:
         member = jax.tree_util.tree_map(lambda a: a.reshape(-1, *a.shape[codes.ndim:])[k], traj)
-    cause_text, remedy = CAUSES[code]
+    cause_text, remedy = causes[code]
+    steps = int(member.stats["num_accepted_steps"])
+    rejected = int(member.stats["num_rejected_steps"])
+    setting = f", rtol={float(rtol):.3g}, atol={float(atol):.3g}" if tolerances else ""
     raise SimulationError(
         f"jrigid.simulate failed {which}at t={float(member.t_stop):.6g} "
         f"(integrating {float(ts[0]):.6g} → {float(ts[-1]):.6g}, "
-        f"{int(member.stats['num_accepted_steps'])} accepted and "
-        f"{int(member.stats['num_rejected_steps'])} rejected steps, "
-        f"rtol={float(rtol):.3g}, atol={float(atol):.3g}): "
+        f"{steps} accepted and {rejected} rejected steps{setting}): "
         f"{cause_text.format(max_steps=max_steps)}; remedy: {remedy}."
     )

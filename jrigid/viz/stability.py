@@ -60,6 +60,16 @@ def map_coordinates(directions, moments) -> tuple[np.ndarray, np.ndarray]:
     return lon, lat
 
 
+def _values(values, directions) -> np.ndarray:
+    """``values`` as a float array of shape ``(N,)``, one per direction, or ``ValueError``."""
+    vals = np.asarray(values, dtype=float)
+    n = np.shape(directions)[0]
+    if vals.shape != (n,):
+        raise ValueError(f"values must have shape (N,) = ({n},), one per direction; got "
+                         f"shape {vals.shape}")
+    return vals
+
+
 def _nearest(directions, query) -> np.ndarray:
     """Index of the nearest of ``directions (N, 3)`` to each of ``query (..., 3)``."""
     from scipy.spatial import cKDTree
@@ -107,7 +117,7 @@ def draw_map(
     Returns:
         the mesh artist (for a colour bar).
     """
-    vals = np.asarray(values, dtype=float)
+    vals = _values(values, directions)
     lo, mid, hi = _order(moments)
     lon_e = np.linspace(-np.pi, np.pi, 2 * resolution + 1)
     lat_e = np.linspace(-np.pi / 2, np.pi / 2, resolution + 1)
@@ -202,7 +212,7 @@ def draw_globe(
         the mesh artist.
     """
     v, right, up = _view_basis(view)
-    vals = np.asarray(values, dtype=float)
+    vals = _values(values, directions)
     edges = np.linspace(-1.0, 1.0, resolution + 1)
     xc, yc = np.meshgrid(0.5 * (edges[1:] + edges[:-1]), 0.5 * (edges[1:] + edges[:-1]))
     r2 = xc * xc + yc * yc
