@@ -17,7 +17,7 @@ from jax.typing import ArrayLike
 
 from jrigid import exact, inertia, initial
 from jrigid import quaternion as quat
-from jrigid._checks import as_floats, check_shape, fail_if
+from jrigid._checks import as_floats, check_shape, is_traced
 from jrigid.body import RigidBody
 from jrigid.integrate import simulate
 from jrigid.scene import Scene
@@ -30,20 +30,32 @@ def _log_sigma_max(jac: jax.Array) -> jax.Array:
 
 
 def _inputs(moments: ArrayLike, omega0: ArrayLike, t: ArrayLike):
-    """``(moments (3,), omega0 (3,), t ())`` as arrays of one floating dtype, checked:
-    a physical inertia, a finite ω0 and a finite horizon ``t > 0`` (``ValueError`` for
-    concrete values, a runtime error under ``jit``)."""
+    """``(moments (3,), omega0 (3,), t (), ok ())`` as arrays of one floating dtype,
+    checked: a physical inertia, a finite ω0 and a finite horizon ``t > 0``. Concrete
+    values raise ``ValueError``; traced ones (a member of a sweep under ``vmap``) give
+    ``ok`` False instead, with stand-in values, so that one bad member gets NaN and does
+    not stop the others."""
     moments, omega0, t = as_floats(moments, omega0, t)
     moments = check_shape(moments, "moments (principal moments)", (3,))
     omega0 = check_shape(omega0, "omega0 (initial body angular velocity)", (3,))
     if jnp.ndim(t) != 0:
         raise ValueError(f"t must be a scalar horizon, got shape {jnp.shape(t)}")
-    moments = inertia.validate(moments, kind="moments")
-    omega0 = fail_if(omega0, ~jnp.all(jnp.isfinite(omega0)), "omega0 must be finite",
-                     lambda: f"omega0 {omega0}")
-    t = fail_if(t, ~(jnp.isfinite(t) & (t > 0)), "t must be a finite horizon > 0",
-                lambda: f"got {t}")
-    return moments, omega0, t
+    with jax.ensure_compile_time_eval():  # concrete values: checked now, even inside a jit
+        bad_inertia = [bad for _, bad, _, _ in inertia.conditions(moments, kind="moments")]
+        bad = {"omega0 must be finite": ~jnp.all(jnp.isfinite(omega0)),
+               "t must be a finite horizon > 0": ~(jnp.isfinite(t) & (t > 0))}
+    if not is_traced(moments, omega0, t):
+        inertia.validate(moments, kind="moments")
+        for text, flag in bad.items():
+            if bool(flag):
+                raise ValueError(f"{text}, got omega0 {omega0}, t {t}")
+        return moments, omega0, t, jnp.asarray(True)
+    ok = ~jnp.any(jnp.stack([*bad_inertia, *bad.values()]))
+    # the member that fails is computed at a harmless stand-in (then NaN), so that the
+    # solvers' own run-time checks do not stop the batch
+    stand_in = jnp.asarray([1.0, 2.0, 3.0], moments.dtype)
+    return (jnp.where(ok, moments, stand_in), jnp.where(ok, omega0, stand_in),
+            jnp.where(ok, t, 1.0), ok)
 
 
 def ftle_exact(moments: ArrayLike, omega0: ArrayLike, t: ArrayLike) -> jax.Array:
@@ -64,14 +76,14 @@ def ftle_exact(moments: ArrayLike, omega0: ArrayLike, t: ArrayLike) -> jax.Array
         t: ``()`` horizon ``> 0``.
 
     Returns:
-        ``()`` FTLE in 1/time.
+        ``()`` FTLE in 1/time; NaN for a traced input that fails the checks below (one
+        member of a sweep does not stop the others).
 
     Raises:
-        ValueError: (a runtime error under ``jit``) a non-physical inertia (as
-            :func:`ftle_simulate`), a non-finite ``omega0``, or a horizon ``t`` that is
-            not finite and ``> 0``.
+        ValueError: (concrete inputs) a non-physical inertia (as :func:`ftle_simulate`),
+            a non-finite ``omega0``, or a horizon ``t`` that is not finite and ``> 0``.
     """
-    moments, omega0, t = _inputs(moments, omega0, t)
+    moments, omega0, t, ok = _inputs(moments, omega0, t)
     q0 = quat.identity(dtype=omega0.dtype)
     # Tie the moments to the traced ω0, so exact.prepare sees a tracer (not a concrete
     # array captured by jit) and skips its concrete-value check.
@@ -80,7 +92,7 @@ def ftle_exact(moments: ArrayLike, omega0: ArrayLike, t: ArrayLike) -> jax.Array
     def final(w):
         return exact.solve(moments, q0, w, t[None])[1][0]
 
-    return _log_sigma_max(jax.jacfwd(final)(omega0)) / t
+    return jnp.where(ok, _log_sigma_max(jax.jacfwd(final)(omega0)) / t, jnp.nan)
 
 
 def ftle_simulate(
@@ -111,13 +123,13 @@ def ftle_simulate(
 
     Returns:
         ``()`` FTLE in 1/time; NaN if the solve failed (``max_steps`` exhausted, the step
-        size collapsed).
+        size collapsed), or for a traced input that fails the checks below.
 
     Raises:
-        ValueError: (a runtime error under ``jit``) a non-physical inertia, a non-finite
-            ``omega0``, or a horizon ``t`` that is not finite and ``> 0``.
+        ValueError: (concrete inputs) a non-physical inertia, a non-finite ``omega0``,
+            or a horizon ``t`` that is not finite and ``> 0``.
     """
-    moments, omega0, t = _inputs(moments, omega0, t)
+    moments, omega0, t, ok = _inputs(moments, omega0, t)
     scene = Scene(RigidBody(moments))
     ts = jnp.stack([jnp.zeros_like(t), t])
 
@@ -139,4 +151,4 @@ def ftle_simulate(
     jac, result = jax.jacfwd(final, has_aux=True)(omega0)
     # a failed solve (step budget, step-size collapse) has no FTLE: NaN, not the -inf of
     # its zero tangents, which a map would show as the most stable direction of all
-    return jnp.where(result == 0, _log_sigma_max(jac) / t, jnp.nan)
+    return jnp.where(ok & (result == 0), _log_sigma_max(jac) / t, jnp.nan)
