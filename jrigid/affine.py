@@ -238,7 +238,12 @@ def rotation_3d(q, pivot=None) -> jax.Array:
     Raises:
         ValueError: (a runtime error under ``jit``) ``q`` is zero or not finite.
     """
-    R = quat.to_matrix(quat.check_quaternion(q, unit=False))
+    return _rotation_3d(quat.check_quaternion(q, unit=False), pivot)
+
+
+def _rotation_3d(q, pivot) -> jax.Array:
+    """:func:`rotation_3d` without the check of ``q`` (a NaN angle gives a NaN matrix)."""
+    R = quat.to_matrix(q)
     T = from_blocks(R, jnp.zeros(3, dtype=R.dtype))
     return _maybe_about(T, pivot)
 
@@ -258,7 +263,7 @@ def rotation_3d_axis_angle(axis, angle, pivot=None) -> jax.Array:
     _check_vector3(axis, "axis")
     axis = fail_if(axis, ~jnp.all(jnp.isfinite(axis), axis=-1) | jnp.all(axis == 0, axis=-1),
                    "rotation_3d_axis_angle: axis must be finite and not zero")
-    return rotation_3d(quat.from_axis_angle(axis, angle), pivot)
+    return _rotation_3d(quat.from_axis_angle(axis, angle), pivot)
 
 
 def rotation_3d_euler(seq: str, angles, pivot=None) -> jax.Array:
@@ -274,7 +279,7 @@ def rotation_3d_euler(seq: str, angles, pivot=None) -> jax.Array:
     """
     angles = as_float(angles)
     _check_vector3(angles, "angles")
-    return rotation_3d(quat.from_euler(seq, angles), pivot)
+    return _rotation_3d(quat.from_euler(seq, angles), pivot)
 
 
 # --------------------------------------------------------------------------- algebra

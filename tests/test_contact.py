@@ -369,7 +369,7 @@ def _box_scene(e, mu, size=(1.0, 0.6, 0.4), mass=2.0, g=9.81):
     return Scene(body, FreeFlight(), (Gravity(g), floor)), floor
 
 
-@pytest.mark.parametrize("e, mu", [(0.5, 0.0), (1.0, 0.0), (0.5, 0.4), (0.0, 0.4)])
+@pytest.mark.parametrize("e, mu", [(0.5, 0.0), (1.0, 0.4)])
 def test_a_box_landing_flat_bounces_straight_up_at_e_times_its_speed(e, mu):
     """Four corners touch at once. By symmetry the total impulse is vertical through the
     centre of mass: P = M (1 + e) |v|, v⁺ = e |v|, ω⁺ = 0, and every corner leaves at

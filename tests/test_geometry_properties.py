@@ -677,8 +677,14 @@ def _rotations_3d(name, data, batch):
             if kind in ("float", "int") else None
     if kind == "wrong_shape":
         return raises_shape_error(call, shape)
+    if r is None and name != "rotation_3d_euler":  # a zero or non-finite quaternion / axis
+        match = ("axis must be finite and not zero" if name == "rotation_3d_axis_angle"
+                 else "zero quaternion|non-finite")
+        with pytest.raises(ValueError, match=match):
+            call()
+        return None
     T = np.asarray(call())
-    if r is None:  # zero quaternion / axis, or non-finite input
+    if r is None:  # non-finite angles
         return each_element_non_finite(T, batch)
     np.testing.assert_allclose(T[..., :3, :3].reshape(-1, 3, 3), r.as_matrix(), atol=1e-14)
     # The pivot is a fixed point.
