@@ -191,7 +191,6 @@ def _energies(scene, kin):
                       scene.potential_energy(kin)])  # fmt: skip
 
 
-@eqx.filter_jit
 def _sequential(m, moments, q, floor, r_all, near, v, omega, max_iter):
     """One point at the floor: impulses at it until it no longer approaches (one impulse,
     :func:`jrigid.impacts.contact_impulse`, unless rounding leaves it approaching)."""
@@ -278,25 +277,41 @@ def _simultaneous(m, moments, q, floor, r_all, near, v, omega, max_sweeps):
     return v, omega, count, first, jnp.sum(lam, axis=0)
 
 
-def _resolve(scene, formulation, y, contact_tol, max_iter):
-    """The impulses at the points within ``contact_tol`` of the floor: at one point,
-    :func:`_sequential`; at several (points listed twice count once), :func:`_simultaneous`."""
+def _near(scene, formulation, y, contact_tol):
+    """``(r_all (P, 3), near (P,))``: the contact points relative to the centre of mass
+    (space frame) and which of them are within ``contact_tol`` of the floor; a point
+    listed twice (or within rounding of another) is one contact point."""
     floor = _floor(scene)
     kin = formulation.kinematics(scene, y)
-    q, x, m, moments = kin.q, kin.x, scene.body.mass, scene.body.moments
-    r_all = quat.rotate(q[None, :], floor.points)
-    near = (x[2] + r_all[:, 2] - floor.height) <= contact_tol
-    # a point listed twice (or within rounding of another) is one contact point
+    r_all = quat.rotate(kin.q[None, :], floor.points)
+    near = (kin.x[2] + r_all[:, 2] - floor.height) <= contact_tol
     size = jnp.max(jnp.abs(r_all))
     same = jnp.all(jnp.abs(r_all[:, None, :] - r_all[None, :, :]) <= 1e-12 * size, axis=-1)
     earlier = jnp.tril(jnp.ones(same.shape, bool), -1)
-    near = near & ~jnp.any(same & earlier & near[None, :], axis=-1)
-    v, omega, count, first, P_sum = jax.lax.cond(
-        jnp.sum(near) > 1,
-        lambda: _simultaneous(m, moments, q, floor, r_all, near, kin.v, kin.omega,
-                              max(max_iter, 1000)),
-        lambda: _sequential(m, moments, q, floor, r_all, near, kin.v, kin.omega, max_iter),
-    )
+    return r_all, near & ~jnp.any(same & earlier & near[None, :], axis=-1)
+
+
+@eqx.filter_jit
+def _points_at_floor(scene, formulation, y, contact_tol):
+    """``()`` int: how many distinct points are within ``contact_tol`` of the floor."""
+    return jnp.sum(_near(scene, formulation, y, contact_tol)[1])
+
+
+@eqx.filter_jit
+def _resolve(scene, formulation, y, contact_tol, max_iter, several: bool):
+    """The impulses at the points within ``contact_tol`` of the floor: at one point,
+    :func:`_sequential`; at several (``several``, static: compiled only when a contact
+    needs it), :func:`_simultaneous`."""
+    floor = _floor(scene)
+    kin = formulation.kinematics(scene, y)
+    q, x, m, moments = kin.q, kin.x, scene.body.mass, scene.body.moments
+    r_all, near = _near(scene, formulation, y, contact_tol)
+    if several:
+        v, omega, count, first, P_sum = _simultaneous(
+            m, moments, q, floor, r_all, near, kin.v, kin.omega, max(max_iter, 1000))
+    else:
+        v, omega, count, first, P_sum = _sequential(
+            m, moments, q, floor, r_all, near, kin.v, kin.omega, max_iter)
     after = type(kin)(q, omega, x, v)
     lowest = jnp.min(x[2] + r_all[:, 2] - floor.height)
     # lift the body out of the floor by the event's tolerance depth (<= contact_tol)
@@ -467,7 +482,9 @@ def simulate_bounces(
             break
         if code == 0:
             break
-        res = jax.device_get(_resolve(scene, formulation, y_hit, tol, 20 * len(floor.points)))
+        several = int(_points_at_floor(scene, formulation, y_hit, tol)) > 1
+        res = jax.device_get(_resolve(scene, formulation, y_hit, tol, 20 * len(floor.points),
+                                      several))
         if int(res["count"]) == 0:  # grazing: the lowest point was not approaching
             grazes += 1
             if grazes > 10:
