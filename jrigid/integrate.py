@@ -554,7 +554,7 @@ def simulate(
             scene, state, ts, rtol, atol, formulation, solver, bound
         )
         return raise_on_failure(traj, throw, ts, rtol, atol, bound, messages, cause,
-                                splitting.CAUSES)
+                                splitting.CAUSES, tolerances=False)
     if isinstance(solver, str):
         if solver != "exact":
             raise ValueError(

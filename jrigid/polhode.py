@@ -30,11 +30,11 @@ __all__ = ["encircled_axis", "omega_at_energy", "polhode", "polhode_family"]
 
 def _moments(moments: ArrayLike, *, single: bool = False) -> jax.Array:
     """``moments`` checked: ``(..., 3)`` (``(3,)`` if ``single``), finite and positive."""
-    moments = check_shape(as_floats(moments)[0], "moments (principal moments)", (3,))
+    moments = inertia.checked_moments(as_floats(moments)[0], allow_nonphysical=True)
     if single and moments.ndim != 1:
         raise ValueError("moments must have shape (3,) (one body; vmap for a batch); got "
                          f"shape {moments.shape}")
-    return inertia.validate(moments, kind="moments", allow_nonphysical=True)
+    return moments
 
 
 def _omega(omega: ArrayLike, name: str, *, single: bool = False) -> jax.Array:

@@ -11,6 +11,7 @@ from jrigid._checks import as_float, check_shape, fail_if, is_traced
 __all__ = [
     "conditions",
     "check",
+    "checked_moments",
     "validate",
 ]
 
@@ -198,3 +199,19 @@ def _size(x, name: str) -> jax.Array:
     return fail_if(
         x, ~(jnp.isfinite(x) & (x >= 0)), f"{name} must be finite and >= 0", lambda: f"{x}"
     )
+
+
+def checked_moments(moments, *, allow_nonphysical: bool = False) -> jax.Array:
+    """Principal moments checked as every closed form needs them: shape ``(..., 3)``
+    (``ValueError`` naming ``moments`` otherwise), then :func:`validate`.
+
+    Args:
+        moments: ``(..., 3)`` principal moments (a float array: convert first).
+        allow_nonphysical: skip the triangle inequality (as :func:`validate`).
+
+    Returns:
+        ``moments`` (as an array; under a transformation, with :func:`check`'s run-time
+        checks attached).
+    """
+    moments = check_shape(moments, "moments (principal moments)", (3,))
+    return validate(moments, kind="moments", allow_nonphysical=allow_nonphysical)

@@ -157,7 +157,7 @@ _FINE = frozenset({int(Result.success), int(Result.event)})
 
 
 def raise_on_failure(traj: Trajectory, throw: bool, ts, rtol, atol, max_steps: int,
-                     messages=None, cause=None, causes=None):
+                     messages=None, cause=None, causes=None, tolerances: bool = True):
     """Apply ``throw`` (see :func:`jrigid.simulate`) to a solved trajectory.
 
     Concrete results: ``ValueError`` for an invalid input (``messages[cause]``),
@@ -166,11 +166,11 @@ def raise_on_failure(traj: Trajectory, throw: bool, ts, rtol, atol, max_steps: i
     ``equinox.branched_error_if`` whose message is the cause first, then the remedy.
     ``throw=False`` returns ``traj`` as it is. ``causes``: ``Result -> (cause, remedy)``
     texts that replace those of :data:`~jrigid.trajectory.CAUSES` (a fixed-step solver's
-    step bound is not the adaptive solver's, and its tolerances are not quoted then).
+    step bound is not the adaptive solver's); ``tolerances``: quote ``rtol``/``atol`` in
+    the message (not for a solver that has none).
     """
     if not throw:
         return traj
-    tolerances = causes is None
     causes = {**CAUSES, **(causes or {})}
     if isinstance(traj.result, jax.core.Tracer):
         texts = [""] * len(Result)

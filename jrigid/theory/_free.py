@@ -32,9 +32,8 @@ def _body(moments: ArrayLike, omega: ArrayLike, *, symmetric: bool = False):
     """``moments`` and ``omega`` as float arrays, checked: each ``(..., 3)``, the moments
     finite and positive and, if ``symmetric``, with ``I1 = I2`` (to ``√eps`` relative)."""
     moments, omega = as_floats(moments, omega)
-    moments = check_shape(moments, "moments (principal moments)", (3,))
+    moments = inertia.checked_moments(moments, allow_nonphysical=True)
     omega = check_shape(omega, "omega (body angular velocity)", (3,))
-    moments = inertia.validate(moments, kind="moments", allow_nonphysical=True)
     if symmetric:
         i1, i2 = moments[..., 0], moments[..., 1]
         tol = math.sqrt(jnp.finfo(moments.dtype).eps)
@@ -330,8 +329,7 @@ def flip_interval_asymptotic(
     if toward not in ("largest", "smallest"):
         raise ValueError(f"toward must be 'largest' or 'smallest', got {toward!r}")
     moments, speed, eps = as_floats(moments, speed, eps)
-    moments = check_shape(moments, "moments (principal moments)", (3,))
-    moments = inertia.validate(moments, kind="moments", allow_nonphysical=True)
+    moments = inertia.checked_moments(moments, allow_nonphysical=True)
     s = jnp.sort(moments, axis=-1)
     i1, i2, i3 = s[..., 0], s[..., 1], s[..., 2]
     lam = speed * jnp.sqrt((i3 - i2) * (i2 - i1) / (i1 * i3))
