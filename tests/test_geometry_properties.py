@@ -1160,6 +1160,35 @@ def _validate(name, data, batch):
             f(value, **kw)
 
 
+@case(inertia, "checked_moments")
+def _checked_moments(name, data, batch):
+    """Principal moments only: returned unchanged when physical; a wrong trailing shape,
+    a negative, non-finite or triangle-breaking moment is a ValueError naming the problem
+    (the triangle inequality is skipped with allow_nonphysical)."""
+    rng = _rng(data, "moments")
+    moments = np.asarray(inertia.box(1.0, *rng.uniform(0.1, 3.0, size=(3,) + batch)))
+    kind = data.draw(st.sampled_from(["valid", "scaled", "triangle", "negative",
+                                      "nonfinite", "wrong_shape"]), label="kind")
+    if kind == "wrong_shape":
+        return raises_shape_error(lambda: inertia.checked_moments(moments[..., :2]),
+                                  "moments (principal moments)")
+    value = {"valid": moments,
+             "scaled": moments * 10.0 ** rng.uniform(-200, 200, size=batch + (1,)),
+             "triangle": np.broadcast_to([1.0, 1.0, 2.5], batch + (3,)),
+             "negative": moments * [1.0, -1.0, 1.0],
+             "nonfinite": _poison(rng, moments)}[kind]
+    if kind in ("valid", "scaled"):
+        np.testing.assert_array_equal(inertia.checked_moments(value), value)
+        return
+    if kind == "triangle":
+        np.testing.assert_array_equal(
+            inertia.checked_moments(value, allow_nonphysical=True), value)
+    expected = {"triangle": "triangle", "negative": "positive definite",
+                "nonfinite": "finite"}[kind]
+    with pytest.raises(ValueError, match=expected):
+        inertia.checked_moments(value)
+
+
 # --------------------------------------------------------------------------- the suite
 
 
