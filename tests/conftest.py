@@ -31,19 +31,38 @@ def _mapped_regions() -> int:
         return 0
 
 
-@pytest.fixture(autouse=True)
-def _release_compiled_programs():
-    """Free JAX's compiled programs when they pile up.
+# Clear between test files once this many regions are mapped (a file's tests reuse each
+# other's programs, so clearing inside a file recompiles them); inside a file only past the
+# hard limit, which leaves room for the ~2000 regions a single heavy test can add.
+_CLEAR_BETWEEN_FILES = 20_000
+_CLEAR_ALWAYS = 45_000
+
+
+def _release() -> None:
+    jax.clear_caches()
+    gc.collect()
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _release_compiled_programs_between_files():
+    """Free JAX's compiled programs when they pile up, at the start of a test file.
 
     Every compiled XLA:CPU program holds memory mappings of its own; a test process that
     compiles thousands of them reaches the kernel's ``vm.max_map_count`` (65530) and then
     crashes inside the compiler. Clearing the caches releases them (they are recompiled on
     demand).
     """
+    if _mapped_regions() > _CLEAR_BETWEEN_FILES:
+        _release()
     yield
-    if _mapped_regions() > 20_000:
-        jax.clear_caches()
-        gc.collect()
+
+
+@pytest.fixture(autouse=True)
+def _release_compiled_programs():
+    """The same inside a file, past the hard limit only."""
+    yield
+    if _mapped_regions() > _CLEAR_ALWAYS:
+        _release()
 
 
 # The test files that take the longest (worker time, measured on 2 cores), run first: with
