@@ -30,7 +30,7 @@ T = 30.0
 TS = jnp.linspace(0.0, T, 101)
 SHORT = TS / 5  # the asymmetric top is chaotic: against DOP853 over T/5 or T/2 only
 MEDIUM = TS / 2
-BOUND = 2**14  # at least the 10⁴ steps per interval of the long run
+BOUND = 2**12  # at least the 2500 steps per interval of the long run
 G = 1.0
 Q0 = quat.from_rotvec(jnp.array([0.5, 0.0, 0.0]))
 
@@ -190,13 +190,14 @@ def test_time_dependent_user_torque_keeps_the_order():
 # --------------------------------------------------------------------------- structure
 
 
-def test_energy_and_vertical_momentum_do_not_drift_over_a_million_steps():
-    """Asymmetric top on a pivot, Strang at h = 0.01: 10⁶ steps over 10⁴ time units."""
-    ts = TS * (1e4 / T)
+def test_energy_and_vertical_momentum_do_not_drift_over_long_runs():
+    """Asymmetric top on a pivot, Strang at h = 0.01: 2.5·10⁵ steps over 2500 time units
+    (about 1200 spin periods)."""
+    ts = TS * (2.5e3 / T)
     traj = simulate(ASYMMETRIC, initial.from_omega(Q0, ASYMMETRIC_W0), ts,
                     solver=split("strang", 0.01))
     assert int(traj.result) == Result.success
-    assert int(traj.stats["num_steps"]) == 10**6
+    assert int(traj.stats["num_steps"]) == 250_000
     energy = np.asarray(traj.energy)
     de = np.abs(energy - energy[0]) / float(traj.kinetic_energy[0])
     half = len(de) // 2

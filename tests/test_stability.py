@@ -368,11 +368,15 @@ def test_ftle_of_a_failed_solve_is_nan_and_bad_horizons_are_refused():
                 f(moments, w, t)
         with pytest.raises(ValueError, match="triangle inequality"):
             f(jnp.array([1.0, 2.0, 4.0]), w, 1.0)
-    # under vmap a bad member is NaN and its neighbours are computed (a sweep goes on)
-    batch = jnp.stack([w, jnp.array([jnp.nan, 1.0, 0.0])])
-    out = jax.jit(jax.vmap(lambda x: stability.ftle_exact(moments, x, 10.0)))(batch)
-    assert np.isnan(float(out[1])) and float(out[0]) == pytest.approx(
-        float(stability.ftle_exact(moments, w, 10.0)), rel=1e-12)
+    # under vmap a bad member is NaN and its neighbours are computed (a sweep goes on): the
+    # good member equals its value in a batch without the bad one (one compiled program,
+    # the horizon an argument)
+    ftle = jax.jit(jax.vmap(stability.ftle_exact, in_axes=(None, 0, None)))
+    out = ftle(moments, jnp.stack([w, jnp.array([jnp.nan, 1.0, 0.0])]), 10.0)
+    clean = ftle(moments, jnp.stack([w, jnp.array([0.05, 1.0, 0.1])]), 10.0)
+    assert np.isnan(float(out[1])) and np.isfinite(float(clean[1]))
+    assert float(out[0]) == pytest.approx(float(clean[0]), rel=1e-12)
     # an integer ω0 no longer truncates the horizon (0.5 became 0)
-    assert float(stability.ftle_exact(moments, jnp.array([0, 1, 0]), 0.5)) == pytest.approx(
-        float(stability.ftle_exact(moments, jnp.array([0.0, 1.0, 0.0]), 0.5)))
+    tilted = jnp.array([[0, 1, 0], [1, 2, 0]])
+    assert np.asarray(ftle(moments, tilted, 0.5)) == pytest.approx(
+        np.asarray(ftle(moments, tilted.astype(float), 0.5)))
