@@ -131,7 +131,7 @@ def main(
     fig = viz.space_body_views(traj, mesh, trail=int(1.5 * h["turn"] / dt), dpi=60)
     rep.figure("t_handle", fig, caption="space frame and body frame", dpi=60)
     if gif:
-        nf = 12 if quick else frames
+        nf = 6 if quick else frames
         span = min(float(traj.ts[-1]), 1.8 * th["flip_interval"], nf * h["turn"] / 8)
         paths = viz.animate(traj, mesh, rep.path("t_handle.gif"), n_frames=nf, fps=20,
                             t_span=(0.0, span), trail=nf // 3, mp4=False,
