@@ -92,6 +92,20 @@ def _simulate(moments, omega0, t_end, n_samples):
     return simulate(scene, state, ts, rtol=1e-10, atol=1e-12)
 
 
+@jax.jit
+def _compare_exact(moments, q, omega, ts):
+    """Largest ``|ω − ω_exact|``, largest rotation angle to the exact orientation, and the
+    exact period of ω, for a trajectory ``q (T, 4)``, ``omega (T, 3)`` at ``ts (T,)``.
+    One jitted function for the module, so that every comparison of the same shapes
+    reuses one compiled program."""
+    from jrigid import exact
+
+    q_exact, w_exact = exact.solve(moments, q[0], omega[0], ts)
+    omega_error = jnp.max(jnp.linalg.norm(omega - w_exact, axis=-1))
+    q_error = jnp.max(quat.distance(q, q_exact))
+    return omega_error, q_error, exact.omega_period(exact.prepare(moments, q[0], omega[0]))
+
+
 def _exact_check(moments, traj) -> dict | None:
     """Compare with :mod:`jrigid.exact` (closed form) if that module is present.
 
@@ -101,18 +115,12 @@ def _exact_check(moments, traj) -> dict | None:
         simulated and exact orientations, radians) and ``period`` (the exact period of ω).
     """
     try:
-        from jrigid import exact
+        from jrigid import exact  # noqa: F401
     except ImportError:
         return None
 
-    @jax.jit
-    def compare(moments, q, omega, ts):
-        q_exact, w_exact = exact.solve(moments, q[0], omega[0], ts)
-        omega_error = jnp.max(jnp.linalg.norm(omega - w_exact, axis=-1))
-        q_error = jnp.max(quat.distance(q, q_exact))
-        return omega_error, q_error, exact.omega_period(exact.prepare(moments, q[0], omega[0]))
-
-    omega_error, q_error, period = compare(jnp.asarray(moments), traj.q, traj.omega, traj.ts)
+    omega_error, q_error, period = _compare_exact(jnp.asarray(moments), traj.q, traj.omega,
+                                                  traj.ts)
     w = np.asarray(traj.omega)
     return dict(
         omega_error=float(omega_error / np.max(np.linalg.norm(w, axis=-1))),
