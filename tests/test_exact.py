@@ -314,6 +314,20 @@ def test_hard_cases_first_ten_periods(name):
     assert err_r.max() < 1e-12 and err_w.max() < 1e-12
 
 
+@pytest.mark.parametrize("q0", [tuple(Q0), (0.72887213, 0.68464985, 0.0, 0.0)])
+def test_whole_periods_from_a_start_with_zero_cn(q0):
+    """A start with ω on the smallest axis zero (cn(τ0) = 0: the demo's T-handle, spun
+    about its middle axis and tilted towards the largest) is at a tie of the half-period
+    rounding at every whole period of ω. There the orientation was 1.9 rad off at the
+    last of several output times (the quaternion's branch taken from two different
+    roundings of one index)."""
+    moments, omega0 = (0.05156507, 0.06144723, 0.11020783), (0.0, 6.27935776, 0.21928)
+    q0 = np.asarray(q0) / np.linalg.norm(q0)
+    period = _reference(moments, omega0, tuple(q0)).period
+    err_r, err_w = _errors(moments, omega0, np.arange(1.0, N_T + 1.0) * period, q0=q0)
+    assert err_r.max() < 1e-12 and err_w.max() < 1e-12, (err_r, err_w)
+
+
 # ------------------------------------------------------------ 10^4 periods
 
 

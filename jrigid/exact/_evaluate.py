@@ -13,7 +13,7 @@ from jax.typing import ArrayLike
 from jrigid import quaternion as quat
 from jrigid._checks import fail_if
 from jrigid.batching import over_times
-from jrigid.special.kernels import jacobi_with_index, parity_sign, rj_sqrt, safe_sqrt
+from jrigid.special.kernels import jacobi_with_index, rj_sqrt, safe_sqrt
 
 from ._arith import _clip, _safe_div, _unstack
 from ._constants import (
@@ -51,8 +51,17 @@ def _general_psi(c, omega_lin, u, st):
     finite = jnp.isfinite(c.kk)
     k_safe = jnp.where(finite, c.kk, 1.0)
     tau = jax.lax.stop_gradient(u + c.tau0)
-    j = jnp.where(finite, jnp.round(tau / (2.0 * k_safe)), 0.0)
-    sign = parity_sign(j)
+    # The half-period index j (τ - 2jK in [-K, K]) has the parity for which
+    # (-1)^j cn(τ) ≥ 0, so the parity is read from cn and j is the nearest integer of that
+    # parity: far from a tie of the rounding. Rounding τ/2K itself ties where cn = 0, and
+    # there XLA's copies of it (one per kernel that uses it, one of them fused into a
+    # multiply-add) rounded to 2 in one and 3 in another: the sign came from one and the
+    # unwrapped angles from the other, an orientation 1.9 rad off (a whole period of ω
+    # from a start with ω1 = 0, at the last of 201 output times).
+    odd = finite & (cnt < 0)
+    j0 = odd.astype(tau.dtype)
+    j = jnp.where(finite, 2.0 * jnp.round(0.5 * (tau / (2.0 * k_safe) - j0)) + j0, 0.0)
+    sign = jnp.where(odd, -1.0, 1.0)
     sr = _clip(sign * snt, -1.0, 1.0)
     cr = _clip(jnp.abs(cnt), 0.0, 1.0)
     kp = safe_sqrt(c.m1)
