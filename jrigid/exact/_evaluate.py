@@ -54,10 +54,10 @@ def _general_psi(c, omega_lin, u, st):
     # The half-period index j (τ - 2jK in [-K, K]) has the parity for which
     # (-1)^j cn(τ) ≥ 0, so the parity is read from cn and j is the nearest integer of that
     # parity: far from a tie of the rounding. Rounding τ/2K itself ties where cn = 0, and
-    # there XLA's copies of it (one per kernel that uses it, one of them fused into a
-    # multiply-add) rounded to 2 in one and 3 in another: the sign came from one and the
-    # unwrapped angles from the other, an orientation 1.9 rad off (a whole period of ω
-    # from a start with ω1 = 0, at the last of 201 output times).
+    # there the compiled program did not use one rounding for both the sign and the
+    # unwrapped angles (which one it took depended on the number of output times, and an
+    # optimization barrier on j did not stop it): an orientation 1.9 rad off at whole
+    # periods of ω from a start with ω1 = 0.
     odd = finite & (cnt < 0)
     j0 = odd.astype(tau.dtype)
     j = jnp.where(finite, 2.0 * jnp.round(0.5 * (tau / (2.0 * k_safe) - j0)) + j0, 0.0)
