@@ -106,19 +106,14 @@ def _compare_exact(moments, q, omega, ts):
     return omega_error, q_error, exact.omega_period(exact.prepare(moments, q[0], omega[0]))
 
 
-def _exact_check(moments, traj) -> dict | None:
-    """Compare with :mod:`jrigid.exact` (closed form) if that module is present.
+def _exact_check(moments, traj) -> dict:
+    """Compare with :mod:`jrigid.exact` (closed form).
 
     Returns:
-        ``None`` without the module, else a dict with ``omega_error`` (largest
-        ``|ω − ω_exact|`` over ``max |ω|``), ``q_error`` (largest rotation angle between the
-        simulated and exact orientations, radians) and ``period`` (the exact period of ω).
+        dict with ``omega_error`` (largest ``|ω − ω_exact|`` over ``max |ω|``), ``q_error``
+        (largest rotation angle between the simulated and exact orientations, radians) and
+        ``period`` (the exact period of ω).
     """
-    try:
-        from jrigid import exact  # noqa: F401
-    except ImportError:
-        return None
-
     omega_error, q_error, period = _compare_exact(jnp.asarray(moments), traj.q, traj.omega,
                                                   traj.ts)
     w = np.asarray(traj.omega)
