@@ -382,8 +382,9 @@ def _solve_arrays(scene, state, ts, rtol, atol, dt0, formulation, solver, adjoin
     if projection is not None and not ends_only:
         # Interpolated outputs are projected here; the two ends are the initial state and
         # a step's result, both projected already (and projecting them again doubled the
-        # projection's share of compilation: 1 s of the heavy top's 2).
-        ys = projection.outputs(ys, scene, y0_flat)
+        # projection's share of compilation: 1 s of the heavy top's 2). In the layout of
+        # saved() they are the first and last rows, kept as they are.
+        ys = projection.outputs(ys, scene, y0_flat, keep_ends=saves_itself)
     ys = flat.states(ys)
     interpolation = flat.interpolation(sol.interpolation) if (dense or saveat.dense) else None
     trials = stepsize_controller.nonfinite_trials(sol.controller_state) if record else None

@@ -185,6 +185,7 @@ def test_two_output_times_give_the_end_state_of_a_longer_output():
     np.testing.assert_allclose(two.q[-1], three.q[-1], atol=1e-13)
     np.testing.assert_allclose(two.omega[-1], three.omega[-1], atol=1e-13)
     np.testing.assert_array_equal(two.q[0], three.q[0])
+    np.testing.assert_array_equal(three.q[0], state.q)  # the initial state, as given
 
 
 @pytest.mark.parametrize("n_out", [2, 21])

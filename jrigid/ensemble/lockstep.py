@@ -151,7 +151,8 @@ def _solve(scene, states, ts, rtol, atol, dt0, formulation, solver, adjoint, max
                                              formulation=formulation, unit_time=True),
               adjoint=adjoint, max_steps=max_steps, unit_time=True)
     saved_ts = saved_times(sol.ts, ts)
-    ys = solver.outputs(sol.ys, scene, y0) if project else sol.ys
+    # rows 0 and T: the initial state and the final step's result, projected already
+    ys = solver.outputs(sol.ys, scene, y0, keep_ends=True) if project else sol.ys
     ys = jax.tree_util.tree_map(lambda a: jnp.moveaxis(a, 1, 0), ys)  # (N, T + 1, ...)
 
     def one(sc, y, bad):

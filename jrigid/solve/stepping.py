@@ -150,8 +150,13 @@ class ProjectedSolver(WrappedSolver):
             dense_info = dict(dense_info, y1=y1)
         return y1, y_error, dense_info, solver_state, result
 
-    def outputs(self, ys, args, y0):
+    def outputs(self, ys, args, y0, keep_ends: bool = False):
         """The saved states ``ys`` (leading axis: the saved times) projected the same way.
+
+        With ``keep_ends``, the first and last rows are returned as they are: in the
+        layout of :func:`jrigid.solve.saving.saved` they are the initial state and the
+        final step's result, both projected already (projecting them again moved the
+        initial state by rounding, so that ``q[0]`` depended on the number of outputs).
 
         Outputs between steps are interpolated, so they are projected after the solve,
         one at a time in a loop. (As one batched (``vmap``) projection it ran faster,
@@ -176,7 +181,8 @@ class ProjectedSolver(WrappedSolver):
             return tree_map(lambda a, b: a.at[i].set(b), ys, y)
 
         n = jax.tree_util.tree_leaves(ys)[0].shape[0]
-        return jax.lax.fori_loop(0, n, body, ys)
+        return jax.lax.fori_loop(1, n - 1, body, ys) if keep_ends else jax.lax.fori_loop(
+            0, n, body, ys)
 
 
 def interpolating_at(solver, ts):
