@@ -79,6 +79,10 @@ a differentiable function of the state there. Without gravity (``g = 0``) the de
 with respect to ``g``, and with the pivot at the centre of mass (``l = 0``) those with
 respect to ``com``, are NaN: the motion is smooth there, but the closed form's constants
 (``β ∝ |g| |l|`` and the axis ``±g/|g|``) are not (the numerical solvers give them).
+In forward mode, a call that differentiates with respect to ``g`` (or ``com``) there
+together with other inputs (``jax.jacfwd(f, argnums=(0, 1))``) is NaN in every column,
+because the NaN partial multiplies a zero change of ``g`` in the other columns: take the
+other derivatives in a call of their own, or in reverse mode, where they stay finite.
 
 Bad input: non-positive moments or mass, ``I1 ≠ I2``, an off-axis centre of mass, a zero
 quaternion or non-finite ``com``, ``g``, ``q0`` or ``ω0`` raise ``ValueError`` for
