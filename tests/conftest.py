@@ -78,6 +78,12 @@ _LONGEST_FIRST = (
     "test_experiments_dynamics.py",
     "test_splitting.py",
     "test_exact_gradients.py",
+    "test_lagrange_top.py",
+    "test_stability.py",
+    "test_dispatch.py",
+    "test_experiments_motion.py",
+    "test_experiments_geometry.py",
+    "test_sweep_members.py",
 )
 
 
