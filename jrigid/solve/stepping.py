@@ -181,8 +181,8 @@ class ProjectedSolver(WrappedSolver):
             return tree_map(lambda a, b: a.at[i].set(b), ys, y)
 
         n = jax.tree_util.tree_leaves(ys)[0].shape[0]
-        return jax.lax.fori_loop(1, n - 1, body, ys) if keep_ends else jax.lax.fori_loop(
-            0, n, body, ys)
+        start, stop = (1, n - 1) if keep_ends else (0, n)
+        return jax.lax.fori_loop(start, stop, body, ys)
 
 
 def interpolating_at(solver, ts):
