@@ -1,4 +1,5 @@
-"""Importing jrigid raises XLA:CPU's small-while-loop threshold (``jrigid._xla``).
+"""Importing jrigid raises XLA:CPU's small-while-loop threshold and turns its MLIR fusion
+emitters off (``jrigid._xla``).
 
 The mechanism is checked where it acts: in a fresh interpreter, the compiled program of a
 solve saving 101 times (the default solver and the eighth-order pairs) holds each of its
@@ -37,6 +38,25 @@ EXTRA = "--xla_backend_extra_options"
 def test_with_threshold_adds_the_option_once(flags, expected):
     assert _xla.with_threshold(flags) == expected
     assert _xla.with_threshold(expected) == expected
+
+
+@pytest.mark.parametrize(
+    "flags, expected",
+    [
+        ("", _xla.EMITTERS),
+        ("--xla_dump_to=/tmp/x", f"--xla_dump_to=/tmp/x {_xla.EMITTERS}"),
+        ("--xla_cpu_use_fusion_emitters=true", "--xla_cpu_use_fusion_emitters=true"),
+    ],
+    ids=["empty", "other_flag", "user_setting_kept"],
+)
+def test_with_emitters_adds_the_flag_once(flags, expected):
+    assert _xla.with_emitters(flags) == expected
+    assert _xla.with_emitters(expected) == expected
+
+
+# What importing jrigid adds to empty XLA_FLAGS besides the threshold: the emitter flag
+# where this jaxlib has it (XLA stops the process on an unknown flag).
+_EMITTERS = f" {_xla.EMITTERS}" if _xla._jaxlib_release() in _xla.EMITTER_JAXLIB else ""
 
 
 def _run(code: str, xla_flags: str | None) -> subprocess.CompletedProcess:
@@ -78,7 +98,7 @@ def test_import_compiles_a_solve_loop_into_one_kernel(solver):
     out = _run(_COMPILED_SOLVE.replace("{solver}", solver), xla_flags=None)
     assert out.returncode == 0, out.stderr
     flags, verdict = out.stdout.split("\n")[:2]
-    assert flags == f"--xla_backend_extra_options={OPTION}=100000000"
+    assert flags == f"--xla_backend_extra_options={OPTION}=100000000{_EMITTERS}"
     assert verdict == "one kernel"
     assert "RuntimeWarning" not in out.stderr
 
@@ -88,8 +108,17 @@ def test_a_threshold_set_by_the_user_is_kept():
                xla_flags=f"--xla_backend_extra_options={OPTION}=1024")
     assert out.returncode == 0, out.stderr
     flags, verdict = out.stdout.split("\n")[:2]
-    assert flags == f"--xla_backend_extra_options={OPTION}=1024"
+    assert flags == f"--xla_backend_extra_options={OPTION}=1024{_EMITTERS}"
     assert verdict == "dispatched"  # XLA's default: the loop's buffers are above 1 kB
+
+
+def test_emitters_the_user_set_are_kept():
+    user = "--xla_cpu_use_fusion_emitters=true"
+    out = _run(_COMPILED_SOLVE.replace("{solver}", "None"), xla_flags=user)
+    assert out.returncode == 0, out.stderr
+    flags, verdict = out.stdout.split("\n")[:2]
+    assert flags == f"{user} --xla_backend_extra_options={OPTION}=100000000"
+    assert verdict == "one kernel"
 
 
 def test_importing_after_jax_started_warns_how_to_get_the_fast_path():
