@@ -14,8 +14,8 @@ first computation starts its backend, so it acts only if jrigid is imported befo
 A threshold the user already set (``XLA_FLAGS`` naming the option) is kept: set it to
 ``1024`` to get XLA's default back.
 
-It also turns XLA:CPU's MLIR fusion emitters off (:data:`EMITTERS`), for the XLA
-versions known to have that flag (:data:`EMITTER_JAXLIB`; XLA stops the process on a flag
+It also turns XLA:CPU's MLIR fusion emitters off (``EMITTERS``), for the XLA
+versions known to have that flag (``EMITTER_JAXLIB``; XLA stops the process on a flag
 it does not know). The older emitters generate the same kernels' code with less work:
 measured on this project's test files (2 cores), 172 s against 232 s for three files of
 derivative tests, and 2.5–2.7 s against 2.9 s of XLA compilation for a first ``simulate``
@@ -44,7 +44,7 @@ THRESHOLD_BYTES = 100_000_000
 #: The XLA flag that turns XLA:CPU's MLIR fusion emitters off.
 EMITTERS = "--xla_cpu_use_fusion_emitters=false"
 
-#: The ``(major, minor)`` jaxlib releases whose XLA has :data:`EMITTERS` and where it was
+#: The ``(major, minor)`` jaxlib releases whose XLA has ``EMITTERS`` and where it was
 #: measured; :func:`configure` leaves other versions' flags alone.
 EMITTER_JAXLIB = ((0, 10),)
 
@@ -68,7 +68,7 @@ def with_threshold(flags: str, threshold: int = THRESHOLD_BYTES) -> str:
 
 
 def with_emitters(flags: str) -> str:
-    """``flags`` (an ``XLA_FLAGS`` value) with :data:`EMITTERS` appended, unless it
+    """``flags`` (an ``XLA_FLAGS`` value) with ``EMITTERS`` appended, unless it
     already names ``xla_cpu_use_fusion_emitters``."""
     if "xla_cpu_use_fusion_emitters" in flags:
         return flags
@@ -98,8 +98,8 @@ def _backend_started() -> bool:
 
 
 def configure() -> bool:
-    """Add ``OPTION`` (and, for the jaxlib releases of :data:`EMITTER_JAXLIB`,
-    :data:`EMITTERS`) to ``XLA_FLAGS`` unless set; warn if JAX has already started.
+    """Add ``OPTION`` (and, for the jaxlib releases of ``EMITTER_JAXLIB``,
+    ``EMITTERS``) to ``XLA_FLAGS`` unless set; warn if JAX has already started.
 
     Returns:
         Whether ``XLA_FLAGS`` was changed.
