@@ -31,7 +31,7 @@ import re
 import sys
 import warnings
 
-__all__ = ["EMITTERS", "EMITTER_JAXLIB", "OPTION", "THRESHOLD_BYTES", "configure",
+__all__ = ["EMITTERS", "EMITTER_FLAG", "EMITTER_JAXLIB", "OPTION", "THRESHOLD_BYTES", "configure",
            "with_emitters", "with_threshold"]
 
 #: The XLA:CPU backend option (one of ``--xla_backend_extra_options``).
@@ -41,14 +41,18 @@ OPTION = "xla_cpu_small_while_loop_byte_threshold"
 #: vmapped chunk of 1024 members saving 1000 times) compile into one kernel each.
 THRESHOLD_BYTES = 100_000_000
 
-#: The XLA flag that turns XLA:CPU's MLIR fusion emitters off.
-EMITTERS = "--xla_cpu_use_fusion_emitters=false"
+#: The XLA flag that selects XLA:CPU's MLIR fusion emitters.
+EMITTER_FLAG = "xla_cpu_use_fusion_emitters"
+
+#: ``EMITTER_FLAG`` set to turn the MLIR fusion emitters off.
+EMITTERS = f"--{EMITTER_FLAG}=false"
 
 #: The ``(major, minor)`` jaxlib releases whose XLA has ``EMITTERS`` and where it was
 #: measured; :func:`configure` leaves other versions' flags alone.
 EMITTER_JAXLIB = ((0, 10),)
 
 _EXTRA = re.compile(r"--xla_backend_extra_options=(\S*)")
+_DIST_INFO = re.compile(r"jaxlib-(\d+)\.(\d+)\.[^-]*\.dist-info")
 
 
 def with_threshold(flags: str, threshold: int = THRESHOLD_BYTES) -> str:
@@ -69,21 +73,32 @@ def with_threshold(flags: str, threshold: int = THRESHOLD_BYTES) -> str:
 
 def with_emitters(flags: str) -> str:
     """``flags`` (an ``XLA_FLAGS`` value) with ``EMITTERS`` appended, unless it
-    already names ``xla_cpu_use_fusion_emitters``."""
-    if "xla_cpu_use_fusion_emitters" in flags:
+    already names ``EMITTER_FLAG``."""
+    if EMITTER_FLAG in flags:
         return flags
     return f"{flags} {EMITTERS}".strip()
 
 
 def _jaxlib_release() -> tuple[int, int] | None:
-    """The installed jaxlib's ``(major, minor)``, or ``None`` if unknown."""
-    from importlib import metadata
+    """The installed jaxlib's ``(major, minor)``, or ``None`` if unknown.
 
-    try:
-        major, minor = metadata.version("jaxlib").split(".")[:2]
-        return int(major), int(minor)
-    except (metadata.PackageNotFoundError, ValueError):
+    Read from the name of its ``jaxlib-X.Y.Z.dist-info`` folder beside the package:
+    ``importlib.metadata`` took about 50 ms, most of ``import jrigid``'s time."""
+    import importlib.util
+
+    spec = importlib.util.find_spec("jaxlib")
+    if spec is None or not spec.origin:
         return None
+    site = os.path.dirname(os.path.dirname(spec.origin))
+    try:
+        names = os.listdir(site)
+    except OSError:
+        return None
+    for name in names:
+        match = _DIST_INFO.fullmatch(name)
+        if match:
+            return int(match.group(1)), int(match.group(2))
+    return None
 
 
 def _backend_started() -> bool:

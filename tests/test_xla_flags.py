@@ -54,6 +54,13 @@ def test_with_emitters_adds_the_flag_once(flags, expected):
     assert _xla.with_emitters(expected) == expected
 
 
+def test_jaxlib_release_is_the_installed_version():
+    from importlib import metadata
+
+    major, minor = metadata.version("jaxlib").split(".")[:2]
+    assert _xla._jaxlib_release() == (int(major), int(minor))
+
+
 # What importing jrigid adds to empty XLA_FLAGS besides the threshold: the emitter flag
 # where this jaxlib has it (XLA stops the process on an unknown flag).
 _EMITTERS = f" {_xla.EMITTERS}" if _xla._jaxlib_release() in _xla.EMITTER_JAXLIB else ""
