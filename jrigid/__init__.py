@@ -35,10 +35,11 @@ import importlib
 import pkgutil
 from typing import TYPE_CHECKING
 
-from jrigid import _dispatch, _xla
+from jrigid import _cache, _dispatch, _xla
 
 _xla.configure()
 _dispatch.configure()
+_cache.configure()
 
 __version__ = "0.1.0"
 

@@ -32,9 +32,7 @@ before the first computation.
 
 from __future__ import annotations
 
-import importlib.abc
-import importlib.util
-import sys
+from jrigid._on_jax import after_jax_import
 
 __all__ = ["OPTION", "configure", "one_kernel"]
 
@@ -58,33 +56,10 @@ def _set_synchronous() -> None:
             pass
 
 
-class _AfterJaxImport(importlib.abc.MetaPathFinder):
-    """Run :func:`_set_synchronous` once ``jax`` has been imported."""
-
-    def find_spec(self, name, path=None, target=None):
-        if name != "jax":
-            return None
-        sys.meta_path.remove(self)
-        spec = importlib.util.find_spec(name)
-        if spec is None or spec.loader is None:
-            return spec
-        exec_module = spec.loader.exec_module
-
-        def exec_then_configure(module):
-            exec_module(module)
-            _set_synchronous()
-
-        spec.loader.exec_module = exec_then_configure
-        return spec
-
-
 def configure() -> None:
     """Run JAX's CPU computations on the calling thread (see the module docstring):
     now if JAX is imported, else as soon as it is."""
-    if "jax" in sys.modules:
-        _set_synchronous()
-    elif not any(isinstance(f, _AfterJaxImport) for f in sys.meta_path):
-        sys.meta_path.insert(0, _AfterJaxImport())
+    after_jax_import(_set_synchronous)
 
 
 def one_kernel(fn, reverse: bool = False):

@@ -2,12 +2,26 @@
 
 Tests that exercise the float32 path request the ``float32`` fixture, which
 switches ``jax_enable_x64`` off for the duration of the test.
+
+The run compiles into a persistent compilation cache of its own (``jrigid._cache``), a
+fresh directory shared by the xdist workers (they inherit this process's environment)
+and by the scripts the tests start, removed at the end; not the user's cache. Set
+``JRIGID_CACHE_DIR`` to choose another (``off`` for none).
 """
 
 import gc
+import os
+import shutil
+import tempfile
 
-import jax
-import pytest
+# before jrigid is imported (the test modules import it)
+_RUN_CACHE = None
+if "JRIGID_CACHE_DIR" not in os.environ:
+    _RUN_CACHE = tempfile.mkdtemp(prefix="jrigid-test-xla-")
+    os.environ["JRIGID_CACHE_DIR"] = _RUN_CACHE
+
+import jax  # noqa: E402
+import pytest  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_rank_promotion", "raise")
@@ -90,3 +104,10 @@ _LONGEST_FIRST = (
 def pytest_collection_modifyitems(items):
     rank = {name: i for i, name in enumerate(_LONGEST_FIRST)}
     items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
+
+
+def pytest_sessionfinish(session):
+    """Remove the compilation cache this process made (the xdist controller's, once its
+    workers are done; a worker makes none, it inherits the controller's)."""
+    if _RUN_CACHE is not None:
+        shutil.rmtree(_RUN_CACHE, ignore_errors=True)

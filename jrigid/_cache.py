@@ -1,0 +1,93 @@
+"""JAX's persistent compilation cache, turned on when jrigid is imported.
+
+Most of a script's first ``simulate`` is XLA compiling the solve (2–4 s on 2 cores for a
+free rotor or a heavy top, ``benchmarks/first_call.py``); the same script run again
+compiles the same programs again. With JAX's persistent compilation cache, compiled
+programs are kept on disk and a later process loads them instead: measured on this
+project's machine (AMD EPYC, 2 cores), a new process's first ``simulate`` of a free rotor
+took 4.1 s with an empty cache and 1.6 s with the program cached (heavy top: 5.5 and
+1.9 s); what is left is tracing and lowering, which no cache saves.
+
+``configure`` points JAX's ``jax_compilation_cache_dir`` at ``DEFAULT_DIR`` (under
+``$XDG_CACHE_HOME``, else ``~/.cache``) when JAX is imported, unless:
+
+- ``JRIGID_CACHE_DIR`` (the environment variable ``ENV``) says otherwise: a directory
+  to use instead, or one of ``OFF`` (``0``, ``off``, ``false``, ``no``, ``none`` or
+  empty) to leave JAX's cache alone;
+- a cache directory is already set (JAX's ``JAX_COMPILATION_CACHE_DIR``, or
+  ``jax.config.update("jax_compilation_cache_dir", ...)`` before importing jrigid), or
+  JAX's caching is off (``jax_enable_compilation_cache``);
+- the directory cannot be created or written (then nothing is cached, silently).
+
+JAX only writes programs whose compilation took at least
+``jax_persistent_cache_min_compile_time_secs`` (1 s by default), so small programs,
+jrigid's or the user's, are not written; each of jrigid's solves is a few hundred kB.
+The cache applies to every program of the process, not only jrigid's (it is JAX's
+own). The directory is created readable by its owner only: JAX trusts what it loads
+from it. Delete it to clear the cache. A cache set after JAX's first compilation has
+no effect (JAX decides once whether it uses one).
+"""
+
+from __future__ import annotations
+
+import os
+
+from jrigid._on_jax import after_jax_import
+
+__all__ = ["DEFAULT_DIR", "ENV", "OFF", "OPTION", "cache_dir", "configure"]
+
+#: The environment variable that chooses the directory (or turns the cache off).
+ENV = "JRIGID_CACHE_DIR"
+
+#: Values of ``ENV`` (case-insensitive, stripped) that leave JAX's cache alone.
+OFF = frozenset({"", "0", "off", "false", "no", "none"})
+
+#: JAX's configuration option for the cache's directory.
+OPTION = "jax_compilation_cache_dir"
+
+#: The directory used when ``ENV`` is not set, below the user's cache directory.
+DEFAULT_DIR = os.path.join("jrigid", "xla")
+
+
+def cache_dir(environ=None) -> str | None:
+    """The directory jrigid asks JAX to cache compiled programs in, or ``None`` (off).
+
+    Args:
+        environ: a mapping of environment variables (default ``os.environ``).
+
+    Returns:
+        ``environ[ENV]`` if set and not one of ``OFF``, ``None`` if one of ``OFF``, else
+        ``DEFAULT_DIR`` below ``$XDG_CACHE_HOME`` (or ``~/.cache``).
+    """
+    environ = os.environ if environ is None else environ
+    chosen = environ.get(ENV)
+    if chosen is not None:
+        return None if chosen.strip().lower() in OFF else os.path.expanduser(chosen)
+    base = environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return os.path.join(base, DEFAULT_DIR)
+
+
+def _writable(path: str) -> bool:
+    try:
+        os.makedirs(path, mode=0o700, exist_ok=True)
+    except OSError:
+        return False
+    return os.path.isdir(path) and os.access(path, os.W_OK | os.X_OK)
+
+
+def _enable() -> None:
+    import jax
+
+    path = cache_dir()
+    if path is None or getattr(jax.config, OPTION, None):
+        return
+    if not getattr(jax.config, "jax_enable_compilation_cache", True):
+        return
+    if _writable(path):
+        jax.config.update(OPTION, path)
+
+
+def configure() -> None:
+    """Point JAX's persistent compilation cache at :func:`cache_dir` (see the module
+    docstring): now if JAX is imported, else as soon as it is."""
+    after_jax_import(_enable)
