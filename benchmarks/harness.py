@@ -29,7 +29,10 @@ putting ``benchmarks/`` on ``sys.path``). It holds:
 Results go to ``benchmarks/results/`` (git-ignored); see :func:`results_dir`.
 
 The module imports neither JAX nor jrigid at the top (:class:`Problem` does when used),
-so a benchmark can parse its command line and set XLA flags before JAX starts.
+so a benchmark can parse its command line and set XLA flags before JAX starts. It turns
+jrigid's persistent compilation cache off (``JRIGID_CACHE_DIR=off``, unless set), so
+that the compile times the benchmarks report are those of a first compilation
+(``first_call.py`` measures the cache itself).
 """
 
 from __future__ import annotations
@@ -50,6 +53,8 @@ from importlib import metadata
 from typing import Any
 
 import numpy as np
+
+os.environ.setdefault("JRIGID_CACHE_DIR", "off")  # cold compiles (see the docstring)
 
 __all__ = [
     "Point",

@@ -166,6 +166,9 @@ def test_first_call_splits_a_fresh_process_first_simulate(tmp_path):
         # the program's tracing, lowering and XLA compilation happen inside the first call
         assert run["compile"] < run["first_simulate"]
         assert run["second_simulate"] < 0.1 * run["first_simulate"]
+        assert run["cache_hits"] == 0  # an empty cache of its own
+    for (run,) in json.loads((tmp_path / "first_call.json").read_text())["cached"].values():
+        assert run["cache_hits"] >= 1  # the same script again: its solve loaded, not compiled
 
 
 def test_outputs_quick_run_times_every_call_and_measures_its_error(tmp_path):
