@@ -22,6 +22,10 @@ took 4.1 s with an empty cache and 1.6 s with the program cached (heavy top: 5.5
 JAX only writes programs whose compilation took at least
 ``jax_persistent_cache_min_compile_time_secs`` (1 s by default), so small programs,
 jrigid's or the user's, are not written; each of jrigid's solves is a few hundred kB.
+The cache holds at most ``MAX_BYTES`` (JAX's ``jax_compilation_cache_max_size``, unless
+set): JAX then removes the least recently used programs, and reads and writes the
+directory under a file lock (``filelock``), so that processes sharing it (the workers
+of a sweep, of a test run) never read a program another is still writing.
 The cache applies to every program of the process, not only jrigid's (it is JAX's
 own). The directory is created readable by its owner only: JAX trusts what it loads
 from it. Delete it to clear the cache. A cache set after JAX's first compilation has
@@ -30,11 +34,12 @@ no effect (JAX decides once whether it uses one).
 
 from __future__ import annotations
 
+import importlib.util
 import os
 
 from jrigid._on_jax import after_jax_import
 
-__all__ = ["DEFAULT_DIR", "ENV", "OFF", "OPTION", "cache_dir", "configure"]
+__all__ = ["DEFAULT_DIR", "ENV", "MAX_BYTES", "OFF", "OPTION", "cache_dir", "configure"]
 
 #: The environment variable that chooses the directory (or turns the cache off).
 ENV = "JRIGID_CACHE_DIR"
@@ -47,6 +52,11 @@ OPTION = "jax_compilation_cache_dir"
 
 #: The directory used when ``ENV`` is not set, below the user's cache directory.
 DEFAULT_DIR = os.path.join("jrigid", "xla")
+
+#: The cache's size limit (bytes), about a thousand of jrigid's compiled solves.
+MAX_BYTES = 1 << 30
+
+_MAX_OPTION = "jax_compilation_cache_max_size"
 
 
 def cache_dir(environ=None) -> str | None:
@@ -83,8 +93,12 @@ def _enable() -> None:
         return
     if not getattr(jax.config, "jax_enable_compilation_cache", True):
         return
-    if _writable(path):
-        jax.config.update(OPTION, path)
+    if not _writable(path):
+        return
+    jax.config.update(OPTION, path)
+    # JAX's default is no limit and no lock; a limit needs filelock (a dependency)
+    if getattr(jax.config, _MAX_OPTION, None) == -1 and importlib.util.find_spec("filelock"):
+        jax.config.update(_MAX_OPTION, MAX_BYTES)
 
 
 def configure() -> None:
