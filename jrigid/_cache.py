@@ -4,9 +4,10 @@ Most of a script's first ``simulate`` is XLA compiling the solve (2–4 s on 2 c
 free rotor or a heavy top, ``benchmarks/first_call.py``); the same script run again
 compiles the same programs again. With JAX's persistent compilation cache, compiled
 programs are kept on disk and a later process loads them instead: measured on this
-project's machine (AMD EPYC, 2 cores), a new process's first ``simulate`` of a free rotor
-took 4.1 s with an empty cache and 1.6 s with the program cached (heavy top: 5.5 and
-1.9 s); what is left is tracing and lowering, which no cache saves.
+project's machine (AMD EPYC, 2 cores), the compilation of a new process's first
+``simulate`` of a free rotor took 4.1 s with an empty cache and 1.6 s with the program
+cached (heavy top: 5.6 and 1.9 s); what is left is tracing and lowering, which no cache
+saves.
 
 ``configure`` points JAX's ``jax_compilation_cache_dir`` at ``DEFAULT_DIR`` (under
 ``$XDG_CACHE_HOME``, else ``~/.cache``) when JAX is imported, unless:
