@@ -40,7 +40,8 @@ import os
 
 from jrigid._on_jax import after_jax_import
 
-__all__ = ["DEFAULT_DIR", "ENV", "MAX_BYTES", "OFF", "OPTION", "cache_dir", "configure"]
+__all__ = ["DEFAULT_DIR", "ENV", "MAX_BYTES", "OFF", "OPTION", "cache_dir", "clear", "configure",
+           "contents"]
 
 #: The environment variable that chooses the directory (or turns the cache off).
 ENV = "JRIGID_CACHE_DIR"
@@ -106,3 +107,36 @@ def configure() -> None:
     """Point JAX's persistent compilation cache at :func:`cache_dir` (see the module
     docstring): now if JAX is imported, else as soon as it is."""
     after_jax_import(_enable)
+
+
+def _entries(path: str) -> list[str]:
+    try:
+        names = os.listdir(path)
+    except OSError:
+        return []
+    return [os.path.join(path, n) for n in names if n.endswith("-cache") or n.endswith("-atime")]
+
+
+def contents(path: str) -> tuple[int, int]:
+    """``(programs, bytes)``: how many compiled programs the cache at ``path`` holds and
+    the bytes its files take (``(0, 0)`` if there is no such directory)."""
+    entries = _entries(path)
+    size = 0
+    for entry in entries:
+        try:
+            size += os.path.getsize(entry)
+        except OSError:  # removed meanwhile
+            pass
+    return sum(e.endswith("-cache") for e in entries), size
+
+
+def clear(path: str) -> int:
+    """Remove the compiled programs of the cache at ``path``; returns how many."""
+    removed = 0
+    for entry in _entries(path):
+        try:
+            os.remove(entry)
+        except OSError:
+            continue
+        removed += entry.endswith("-cache")
+    return removed

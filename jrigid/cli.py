@@ -50,14 +50,15 @@ def _add_out(parser: argparse.ArgumentParser, help: str) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The argument parser with its ``list``, ``run``, ``demo`` and ``docs`` subcommands."""
+    """The argument parser with its ``list``, ``run``, ``demo``, ``docs`` and ``cache``
+    subcommands."""
     parser = argparse.ArgumentParser(
         prog="jrigid",
         description="jrigid: differentiable rigid-body rotation in JAX. "
         "Run experiments and the demo; results go to results/<name>/.",
     )
     parser.add_argument("--version", action="version", version=f"jrigid {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="{list,run,demo,docs}")
+    sub = parser.add_subparsers(dest="command", metavar="{list,run,demo,docs,cache}")
 
     p_list = sub.add_parser(
         "list", help="list every experiment, one line each", description="List every experiment."
@@ -118,7 +119,16 @@ def build_parser() -> argparse.ArgumentParser:
     p_docs.add_argument("action", choices=("build", "serve"), help="build the site, or serve it")
     p_docs.add_argument("--quick", action="store_true", help="run the tutorials at small sizes")
     _add_out(p_docs, "site folder (default: site/)")
-    for p in (p_list, p_run, p_demo, p_docs):
+    p_cache = sub.add_parser(
+        "cache",
+        help="show (or clear) the persistent compilation cache",
+        description="Show where jrigid keeps the programs XLA compiled, so that a script run "
+        "again loads them instead of compiling them, and how much it holds; `clear` empties "
+        "it. JRIGID_CACHE_DIR chooses the directory (off: none).",
+    )
+    p_cache.add_argument("action", nargs="?", choices=("show", "clear"), default="show",
+                         help="show the cache (default) or clear it")
+    for p in (p_list, p_run, p_demo, p_docs, p_cache):
         p.set_defaults(subparser=p)  # so that errors print the subcommand's usage
     return parser
 
@@ -285,6 +295,28 @@ def _cmd_docs(p_docs: argparse.ArgumentParser, args: argparse.Namespace) -> int:
     return subprocess.call(argv, env=env, cwd=root)
 
 
+def _cmd_cache(action: str) -> int:
+    from jrigid import _cache
+
+    path = _cache.cache_dir()
+    theirs = os.environ.get("JAX_COMPILATION_CACHE_DIR")
+    if theirs:
+        print(f"JAX_COMPILATION_CACHE_DIR={theirs} is set: JAX caches there, not in jrigid's")
+        return 0
+    if path is None:
+        print(f"the compilation cache is off ({_cache.ENV}={os.environ.get(_cache.ENV, '')!r})")
+        return 0
+    if action == "clear":
+        removed = _cache.clear(path)
+        print(f"{path}: removed {removed} compiled program{'' if removed == 1 else 's'}")
+        return 0
+    programs, size = _cache.contents(path)
+    plural = "" if programs == 1 else "s"
+    print(f"{path}: {programs} compiled program{plural}, {size / 2**20:.1f} MiB "
+          f"(at most {_cache.MAX_BYTES / 2**20:.0f} MiB; `jrigid cache clear` empties it)")
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``jrigid`` command.
 
@@ -317,6 +349,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _cmd_run(args.subparser, args, args.name)
     if args.command == "docs":
         return _cmd_docs(args.subparser, args)
+    if args.command == "cache":
+        return _cmd_cache(args.action)
     # demo: `jrigid demo ...` is `jrigid run demo ...`
     args.param = []
     return _cmd_run(args.subparser, args, "demo")

@@ -85,7 +85,31 @@ def test_help_for_each_command(argv, capsys):
 
 def test_no_command_prints_help(capsys):
     assert cli.main([]) == 0
-    assert "{list,run,demo,docs}" in capsys.readouterr().out
+    assert "{list,run,demo,docs,cache}" in capsys.readouterr().out
+
+
+def test_cache_shows_and_clears_the_compilation_cache(capsys, monkeypatch, tmp_path):
+    """``jrigid cache`` counts what the cache directory holds; ``clear`` removes the
+    compiled programs (and their access times), nothing else."""
+    monkeypatch.delenv("JAX_COMPILATION_CACHE_DIR", raising=False)
+    monkeypatch.setenv("JRIGID_CACHE_DIR", str(tmp_path))
+    for key, size in (("jit_a-1", 1000), ("jit_b-2", 3000)):
+        (tmp_path / f"{key}-cache").write_bytes(b"x" * size)
+        (tmp_path / f"{key}-atime").write_bytes(b"t" * 8)
+    (tmp_path / "notes.txt").write_text("kept")
+    assert cli.main(["cache"]) == 0
+    assert f"{tmp_path}: 2 compiled programs" in capsys.readouterr().out
+    assert cli.main(["cache", "clear"]) == 0
+    assert "removed 2 compiled programs" in capsys.readouterr().out
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]
+    assert cli.main(["cache"]) == 0
+    assert f"{tmp_path}: 0 compiled programs, 0.0 MiB" in capsys.readouterr().out
+    monkeypatch.setenv("JRIGID_CACHE_DIR", "off")
+    assert cli.main(["cache"]) == 0
+    assert "cache is off" in capsys.readouterr().out
+    monkeypatch.setenv("JAX_COMPILATION_CACHE_DIR", str(tmp_path))
+    assert cli.main(["cache", "clear"]) == 0
+    assert "JAX_COMPILATION_CACHE_DIR" in capsys.readouterr().out
 
 
 # --------------------------------------------------------------------------- errors
