@@ -60,6 +60,9 @@ MAX_BYTES = 1 << 30
 
 _MAX_OPTION = "jax_compilation_cache_max_size"
 
+# How JAX names a cached program's file and its access-time file.
+_PROGRAM, _ACCESSED = "-cache", "-atime"
+
 
 def cache_dir(environ=None) -> str | None:
     """The directory jrigid asks JAX to cache compiled programs in, or ``None`` (off).
@@ -114,7 +117,7 @@ def _entries(path: str) -> list[str]:
         names = os.listdir(path)
     except OSError:
         return []
-    return [os.path.join(path, n) for n in names if n.endswith("-cache") or n.endswith("-atime")]
+    return [os.path.join(path, n) for n in names if n.endswith((_PROGRAM, _ACCESSED))]
 
 
 def contents(path: str) -> tuple[int, int]:
@@ -127,7 +130,7 @@ def contents(path: str) -> tuple[int, int]:
             size += os.path.getsize(entry)
         except OSError:  # removed meanwhile
             pass
-    return sum(e.endswith("-cache") for e in entries), size
+    return sum(e.endswith(_PROGRAM) for e in entries), size
 
 
 def clear(path: str) -> int:
@@ -138,5 +141,5 @@ def clear(path: str) -> int:
             os.remove(entry)
         except OSError:
             continue
-        removed += entry.endswith("-cache")
+        removed += entry.endswith(_PROGRAM)
     return removed

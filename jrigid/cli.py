@@ -298,11 +298,11 @@ def _cmd_docs(p_docs: argparse.ArgumentParser, args: argparse.Namespace) -> int:
 def _cmd_cache(action: str) -> int:
     from jrigid import _cache
 
-    path = _cache.cache_dir()
     theirs = os.environ.get("JAX_COMPILATION_CACHE_DIR")
     if theirs:
         print(f"JAX_COMPILATION_CACHE_DIR={theirs} is set: JAX caches there, not in jrigid's")
         return 0
+    path = _cache.cache_dir()
     if path is None:
         print(f"the compilation cache is off ({_cache.ENV}={os.environ.get(_cache.ENV, '')!r})")
         return 0

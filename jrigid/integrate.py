@@ -23,7 +23,9 @@ so changing them does not recompile. When nothing but the outputs at ``ts`` is a
 diffrax (no ``saveat``, ``dense``, ``stepsize_controller`` or event; an explicit solver;
 the default or forward-mode adjoint), the outputs are saved by the step-size controller
 (:mod:`jrigid.solve.saving`) and the whole program runs as one XLA:CPU kernel on the
-calling thread (``jrigid._dispatch``): a jitted call then costs its steps and about 40 µs.
+calling thread (``jrigid._dispatch``): a jitted call then costs its steps and about 40 µs
+(Intel Xeon; 85–140 µs on the AMD EPYC of the README's latest run, most of it passing
+the scene and state in and the trajectory out).
 The compiled program returns only the formulation's states, ``q``, ω, the outcome and the
 step counts (the scene and ``ts`` are the inputs); the ``Trajectory``'s other quantities
 are computed when first read. (Each array a program returns is initialised and copied

@@ -159,7 +159,8 @@ def test_quick_run_produces_table_plot_and_finite_errors(tmp_path):
 def test_first_call_splits_a_fresh_process_first_simulate(tmp_path):
     first_call.main(["--runs", "1", "--out", str(tmp_path)])
     assert "Largest first compile" in (tmp_path / "first_call.md").read_text()
-    runs = json.loads((tmp_path / "first_call.json").read_text())["runs"]
+    data = json.loads((tmp_path / "first_call.json").read_text())
+    runs = data["runs"]
     assert set(runs) == {"rotor", "top"}
     for (run,) in runs.values():
         assert all(run[c] > 0 for c in first_call.COLUMNS)
@@ -167,7 +168,7 @@ def test_first_call_splits_a_fresh_process_first_simulate(tmp_path):
         assert run["compile"] < run["first_simulate"]
         assert run["second_simulate"] < 0.1 * run["first_simulate"]
         assert run["cache_hits"] == 0  # an empty cache of its own
-    for (run,) in json.loads((tmp_path / "first_call.json").read_text())["cached"].values():
+    for (run,) in data["cached"].values():
         assert run["cache_hits"] >= 1  # the same script again: its solve loaded, not compiled
 
 
