@@ -102,6 +102,18 @@ def check_number(name: str, value, low: float) -> None:
         raise ValueError(f"{name} must be a number >= {low}, got {value!r}")
 
 
+def check_tolerance(name: str, value, high: float) -> None:
+    """``ValueError`` naming ``name`` unless ``value`` (a tolerance: a number, or a
+    concrete scalar array) is finite and in ``[0, high]``. A traced value is not
+    checked (it has no value yet)."""
+    if is_traced(value):
+        return
+    array = np.asarray(value)
+    number = float(array) if array.ndim == 0 and array.dtype.kind in "fiu" else None
+    if isinstance(value, bool) or number is None or not 0 <= number <= high:
+        raise ValueError(f"{name} must be a number in [0, {high:g}], got {value!r}")
+
+
 def is_traced(*trees) -> bool:
     """True if any leaf of the arguments is a JAX tracer (inside jit, vmap, grad, ...)."""
     return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(trees))

@@ -427,7 +427,12 @@ def to_homogeneous(x, w) -> jax.Array:
     """
     x = as_float(x)
     _dim_of_vector(x, "x")
-    w = jnp.broadcast_to(jnp.asarray(w, dtype=x.dtype), x.shape[:-1])
+    w = jnp.asarray(w, dtype=x.dtype)
+    try:
+        w = jnp.broadcast_to(w, x.shape[:-1])
+    except ValueError:
+        raise ValueError(f"to_homogeneous: w must be a scalar or of x's batch shape "
+                         f"{x.shape[:-1]}; got shape {w.shape}") from None
     return jnp.concatenate([x, w[..., None]], axis=-1)
 
 

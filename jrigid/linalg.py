@@ -148,9 +148,13 @@ def rescale(x: jax.Array) -> tuple[jax.Array, jax.Array]:
     """Split ``x (..., n)`` into ``(x / s, s)`` so that squaring ``x / s`` is safe.
 
     ``s (..., 1)`` is ``1`` (and ``x`` is returned unchanged, bit for bit) unless the
-    largest ``|component|`` lies outside ``[sqrt(tiny)/eps, sqrt(max)/(2n)]``, where the
-    sum of squares would overflow or lose precision; then ``s`` is that largest
-    component, so ``x / s`` has entries in ``[-1, 1]``. A zero ``x`` keeps ``s = 1``. An
+    largest ``|component|`` ``m`` lies outside ``[sqrt(tiny)/eps, sqrt(max)/(2n)]``, where
+    the sum of squares would overflow or lose precision; then ``s`` is a power of two,
+    ``2^e`` for ``m`` below that range and ``2^(e−2)`` above it (``m = f 2^e``,
+    ``½ ≤ f < 1``), so ``x / s`` has entries below 1 (or 4) in size, divided exactly. Its
+    reciprocal is a normal number even for ``m`` near the largest float: XLA computes
+    ``x / s`` as ``x · (1/s)``, and a reciprocal below the smallest normal number
+    (``s > 4.5e307`` in float64) is flushed to zero on a CPU. A zero ``x`` keeps ``s = 1``. An
     ``x`` with a NaN or infinite entry has no direction: ``x / s`` is all NaN there, so
     every function built on it returns NaN for that element. ``s`` carries no gradient:
     functions of ``x`` that are homogeneous (``normalize``, ``norm``, the conversions)
@@ -166,7 +170,10 @@ def rescale(x: jax.Array) -> tuple[jax.Array, jax.Array]:
         m = jnp.maximum(m, jnp.abs(x[..., i : i + 1]))
     finite = jnp.isfinite(m)
     keep = ((m >= lo) & (m <= hi)) | (m == 0) | ~finite
-    s = lax.stop_gradient(jnp.where(keep, jnp.ones_like(m), m))
+    ones = jnp.ones_like(m)
+    _, e = jnp.frexp(jnp.where(keep, ones, m))
+    power = jnp.ldexp(ones, jnp.where(m > hi, e - 2, e))
+    s = lax.stop_gradient(jnp.where(keep, ones, power))
     return jnp.where(finite, x / s, jnp.nan), s
 
 

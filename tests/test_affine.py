@@ -656,3 +656,10 @@ def test_python_scalars_take_the_arrays_dtype():
     assert affine.shear_3d(f32(0.2)).dtype == jnp.float32
     assert affine.rotation_3d_axis_angle(jnp.ones(3, f32), 0.5).dtype == jnp.float32
     assert affine.shear_3d(0.2).dtype == jnp.float64
+
+
+def test_to_homogeneous_names_a_w_of_the_wrong_shape():
+    with pytest.raises(ValueError, match="w must be a scalar or of x's batch shape"):
+        affine.to_homogeneous(jnp.ones(3), jnp.ones(2))
+    np.testing.assert_array_equal(affine.to_homogeneous(jnp.ones((2, 3)), jnp.zeros(2)),
+                                  [[1, 1, 1, 0], [1, 1, 1, 0]])

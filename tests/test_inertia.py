@@ -606,3 +606,16 @@ def test_python_scalars_take_the_arrays_dtype():
     assert inertia.parallel_axis(inertia.to_tensor(jnp.ones(3, f32)), 1.0,
                                  jnp.ones(3, f32)).dtype == jnp.float32
     assert inertia.t_handle_moments(1.0).dtype == jnp.float64
+
+
+def test_tensor_helpers_refuse_a_non_finite_origin_and_a_matrix_that_is_no_rotation():
+    masses, positions = jnp.ones(2), jnp.eye(3)[:2]
+    with pytest.raises(ValueError, match="origin must be finite"):
+        inertia.from_point_masses(masses, positions, origin=jnp.array([jnp.nan, 0.0, 0.0]))
+    with pytest.raises(ValueError, match="R must be a rotation matrix"):
+        inertia.rotate_tensor_by_matrix(jnp.eye(3), 2.0 * jnp.eye(3))
+    # a rotation passes, and agrees with the quaternion form
+    q = quat.normalize(jnp.array([1.0, 2.0, 3.0, 4.0]))
+    tensor = jnp.diag(jnp.array([1.0, 2.0, 3.0]))
+    np.testing.assert_allclose(inertia.rotate_tensor_by_matrix(tensor, quat.to_matrix(q)),
+                               inertia.rotate_tensor(tensor, q), atol=1e-14)

@@ -213,3 +213,22 @@ def test_a_non_finite_quaternion_has_no_angles_and_no_lock(seq, bad):
     forced to 0 as at a lock) and no gimbal lock reported."""
     assert np.all(np.isnan(np.asarray(jq.to_euler(seq, jnp.asarray(bad)))))
     assert not bool(jq.gimbal_lock(seq, jnp.asarray(bad)))
+
+
+@pytest.mark.parametrize("eps", [0.5, -1e-3, float("nan"), "1e-3", True])
+def test_a_gimbal_lock_tolerance_out_of_range_is_refused(eps):
+    """A large tolerance returned 'locked' angles 0.18 rad from the rotation (eps = 0.5)."""
+    q = jq.from_euler("XYZ", jnp.array([0.3, 1.2, -0.5]))
+    for f in (jq.to_euler, jq.gimbal_lock):
+        with pytest.raises(ValueError, match="eps"):
+            f("XYZ", q, eps=eps)
+
+
+def test_angles_returned_as_locked_stand_for_the_rotation_within_eps():
+    """Within eps of lock the third angle is set to zero: the rotation the angles give is
+    within about eps/2 of q, for every accepted eps (up to 1e-2)."""
+    for eps in (1e-2, 1e-4, 1e-6):
+        q = jq.from_euler("XYZ", jnp.array([0.3, np.pi / 2 - 0.9 * eps, -0.5]))
+        assert bool(jq.gimbal_lock("XYZ", q, eps=eps))
+        back = jq.from_euler("XYZ", jq.to_euler("XYZ", q, eps=eps))
+        assert float(jq.distance(back, q)) <= eps

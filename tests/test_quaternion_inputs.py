@@ -189,6 +189,24 @@ def test_from_rotvec_extreme_lengths():
     np.testing.assert_allclose(jq.norm(jq.from_rotvec(axis * 1e300)), 1.0, rtol=1e-12)
 
 
+@pytest.mark.parametrize("dtype, top", [(np.float64, 1.7e308), (np.float32, 3.0e38)])
+def test_scale_invariant_functions_at_the_top_of_the_float_range(dtype, top):
+    """Components above ``1/tiny`` (4.5e307 in float64, 8.5e37 in float32) had a norm of 0
+    and NaN conversions: the rescaling divided by the reciprocal of the largest component,
+    a number below the smallest normal one, which a CPU flushes to zero."""
+    q = np.array([0.6, -0.0, 0.8, 0.0], dtype)
+    big = jnp.asarray(q * top, dtype)
+    assert float(jq.norm(big)) == pytest.approx(top, rel=1e-6)
+    np.testing.assert_allclose(jq.normalize(big), q, atol=1e-6)
+    np.testing.assert_allclose(jq.to_matrix(big), jq.to_matrix(jnp.asarray(q)), atol=1e-6)
+    np.testing.assert_allclose(jq.to_rotvec(big), jq.to_rotvec(jnp.asarray(q)), atol=1e-6)
+    np.testing.assert_allclose(jq.to_euler("XYZ", big), jq.to_euler("XYZ", jnp.asarray(q)),
+                               atol=1e-5)
+    axis = jnp.asarray([top, 0.0, 0.0], dtype)  # a huge rotation vector: still unit
+    assert float(jq.norm(jq.from_rotvec(axis))) == pytest.approx(1.0, rel=1e-6)
+    assert abs(float(jq.from_rotvec(axis)[1])) > 0.0
+
+
 def test_normalize_gradient_is_exact_at_extreme_norms():
     """d normalize(c q)/dq = J(q) / c, the derivative of the unscaled function."""
     q = jnp.array([0.1, -0.5, 0.7, 0.3])

@@ -299,3 +299,11 @@ def test_a_non_finite_matrix_gives_an_all_nan_quaternion(entry):
         m = np.eye(3)
         m.flat[i] = entry
         assert np.all(np.isnan(np.asarray(jq.from_matrix(jnp.asarray(m))))), i
+
+
+@pytest.mark.parametrize("atol", [float("nan"), -1.0, 0.5, "0.1"])
+def test_from_matrix_refuses_a_tolerance_out_of_range(atol):
+    """atol=NaN accepted 3·I as a rotation; a negative one blamed the matrix."""
+    with pytest.raises(ValueError, match="atol"):
+        jq.from_matrix(3.0 * jnp.eye(3), atol=atol)
+    np.testing.assert_allclose(jq.from_matrix(jnp.eye(3), atol=0.1), [1.0, 0, 0, 0])

@@ -50,8 +50,8 @@ def from_point_masses(masses, positions, origin=None) -> jax.Array:
     Args:
         masses: ``(..., N)``, finite and ``>= 0``.
         positions: ``(..., N, 3)``, finite.
-        origin: ``(..., 3)``; default the centre of mass (then the total mass must be
-            ``> 0``).
+        origin: ``(..., 3)``, finite; default the centre of mass (then the total mass
+            must be ``> 0``).
 
     Returns:
         ``(..., 3, 3)``.
@@ -79,6 +79,7 @@ def from_point_masses(masses, positions, origin=None) -> jax.Array:
     else:
         origin = as_float(origin)
         check_shape(origin, "origin", (3,))
+        origin = fail_if(origin, ~jnp.isfinite(origin), "origin must be finite")
         batch = jnp.broadcast_shapes(batch, origin.shape[:-1])
         masses = jnp.broadcast_to(masses, batch + (n,))
         positions = jnp.broadcast_to(positions, batch + (n, 3))
@@ -123,7 +124,10 @@ def rotate_tensor_by_matrix(inertia, R) -> jax.Array:
 
     Args:
         inertia: ``(..., 3, 3)``.
-        R: ``(..., 3, 3)`` rotation matrix.
+        R: ``(..., 3, 3)`` rotation matrix: orthogonal within
+            :func:`~jrigid.quaternion.default_atol` (``max |RᵀR − 1|``), else
+            ``ValueError`` (under ``jit``, at run time): another matrix would not change
+            the frame but the body. A non-finite ``R`` gives a non-finite result.
 
     Returns:
         ``(..., 3, 3)``.
@@ -131,6 +135,16 @@ def rotate_tensor_by_matrix(inertia, R) -> jax.Array:
     inertia, R = as_floats(inertia, R)
     _check_tensor(inertia)
     _check_tensor(R, "R")
+    gram = jnp.swapaxes(R, -1, -2) @ R
+    error = jnp.max(jnp.abs(gram - _eye(R[..., 0])), axis=(-2, -1))
+    R = fail_if(R, error > quat.default_atol(R.dtype),  # (NaN in, NaN out)
+                "R must be a rotation matrix (orthogonal; max |RᵀR - 1| exceeds the "
+                "tolerance)", lambda: f"max |RᵀR - 1| = {jnp.max(error):.3g}")
+    return _rotated(inertia, R)
+
+
+def _rotated(inertia: jax.Array, R: jax.Array) -> jax.Array:
+    """``R I Rᵀ``, unchecked."""
     return R @ inertia @ jnp.swapaxes(R, -1, -2)
 
 
@@ -144,7 +158,9 @@ def rotate_tensor(inertia, q) -> jax.Array:
     Returns:
         ``(..., 3, 3)`` in the space frame. ``rotate_tensor(I, quat.conjugate(q))`` goes back.
     """
-    return rotate_tensor_by_matrix(inertia, quat.to_matrix(q))
+    inertia = as_float(inertia)
+    _check_tensor(inertia)
+    return _rotated(inertia, quat.to_matrix(q))
 
 
 @jax.custom_jvp

@@ -326,11 +326,16 @@ def from_rotvec(rotvec: ArrayLike) -> jax.Array:
     n2_scaled = dot(r_scaled, r_scaled)
     theta2 = s * s * n2_scaled  # overflows to inf only where θ is huge: not small then
     small = theta2 < epsilon(r.dtype)
-    theta = s * jnp.sqrt(jnp.where(small, jnp.ones_like(n2_scaled), n2_scaled))
+    length = jnp.sqrt(jnp.where(small, jnp.ones_like(n2_scaled), n2_scaled))  # θ / s
+    theta = s * length
     theta4 = theta2 * theta2
     w = jnp.where(small, 1.0 - theta2 / 8.0 + theta4 / 384.0, jnp.cos(0.5 * theta))
-    k = jnp.where(small, 0.5 - theta2 / 48.0 + theta4 / 3840.0, jnp.sin(0.5 * theta) / theta)
-    return jnp.concatenate([w[..., None], k[..., None] * r], axis=-1)
+    # sin(θ/2) along the unit axis r / θ = r_scaled / length (for a huge θ, sin(θ/2) / θ
+    # would be below the smallest normal number, flushed to zero on a CPU)
+    vector = jnp.where(small[..., None],
+                       (0.5 - theta2 / 48.0 + theta4 / 3840.0)[..., None] * r,
+                       (jnp.sin(0.5 * theta) / length)[..., None] * r_scaled)
+    return jnp.concatenate([w[..., None], vector], axis=-1)
 
 
 def to_rotvec(q: ArrayLike) -> jax.Array:

@@ -28,6 +28,7 @@ import jax
 import jax.numpy as jnp
 from jax.typing import ArrayLike
 
+from jrigid._checks import check_tolerance
 from jrigid.linalg import rescale
 
 from ._utils import quaternion_arg, vector_arg
@@ -54,8 +55,18 @@ def _parse(seq: str) -> tuple[list[int], bool]:
     return ["xyz".index(c) for c in seq.lower()], seq.islower()
 
 
-def _default_eps(dtype) -> float:
-    return 1e-5 if jnp.finfo(dtype).bits <= 32 else 1e-7
+#: The largest gimbal-lock tolerance accepted: angles returned as locked represent the
+#: rotation only to within about the tolerance (in radians).
+MAX_EPS = 1e-2
+
+
+def _eps(eps, dtype):
+    """The gimbal-lock tolerance: the dtype's default for ``None``, else ``eps`` checked
+    to be a number in ``[0, MAX_EPS]`` (``ValueError`` naming ``eps`` otherwise)."""
+    if eps is None:
+        return 1e-5 if jnp.finfo(dtype).bits <= 32 else 1e-7
+    check_tolerance("eps (the gimbal-lock tolerance)", eps, MAX_EPS)
+    return eps
 
 
 def _elementary(axis: int, angle: jax.Array) -> jax.Array:
@@ -129,13 +140,14 @@ def gimbal_lock(seq: str, q: ArrayLike, eps: float | None = None) -> jax.Array:
         seq: one of :data:`EULER_SEQUENCES`.
         q: ``(..., 4)`` quaternion.
         eps: tolerance in radians on the second angle; default ``1e-7`` (float64,
-            scipy's value) or ``1e-5`` (float32).
+            scipy's value) or ``1e-5`` (float32); at most ``1e-2`` (angles returned as
+            locked stand for ``q`` only to within about ``eps``).
 
     Returns:
         ``(...)`` boolean array.
     """
     q, _ = rescale(quaternion_arg(q))
-    eps = _default_eps(q.dtype) if eps is None else eps
+    eps = _eps(eps, q.dtype)
     a, b, c, d, *_ = _components(seq, q)
     _, case1, case2 = _middle_and_cases(a, b, c, d, eps)
     return (case1 | case2) & _rotation(q)
@@ -169,7 +181,7 @@ def to_euler(seq: str, q: ArrayLike, eps: float | None = None) -> jax.Array:
         ValueError: for an invalid sequence or if ``q.shape[-1] != 4``.
     """
     q, _ = rescale(quaternion_arg(q))
-    eps = _default_eps(q.dtype) if eps is None else eps
+    eps = _eps(eps, q.dtype)
     a, b, c, d, extrinsic, symmetric, sign = _components(seq, q)
     middle, case1, case2 = _middle_and_cases(a, b, c, d, eps)
     case0 = ~(case1 | case2)

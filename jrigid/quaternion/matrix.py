@@ -14,7 +14,7 @@ import jax
 import jax.numpy as jnp
 from jax.typing import ArrayLike
 
-from jrigid._checks import as_float, is_traced
+from jrigid._checks import as_float, check_tolerance, is_traced
 from jrigid.linalg import cross, dot, rescale
 
 from ._utils import (
@@ -73,6 +73,11 @@ def _det3(m: jax.Array) -> jax.Array:
     return dot(a, cross(b, c))
 
 
+#: The largest orthogonality tolerance :func:`from_matrix` accepts: beyond it a matrix is
+#: too far from a rotation for its normalised Shepperd estimate to mean anything.
+MAX_ATOL = 0.1
+
+
 def from_matrix(matrix: ArrayLike, *, atol: float | None = None) -> jax.Array:
     """Unit quaternion of an active rotation matrix (Shepperd's method).
 
@@ -98,17 +103,23 @@ def from_matrix(matrix: ArrayLike, *, atol: float | None = None) -> jax.Array:
 
     Args:
         matrix: ``(..., 3, 3)`` rotation matrix.
-        atol: orthogonality tolerance; default
+        atol: orthogonality tolerance, in ``[0, 0.1]``; default
             :func:`~jrigid.quaternion.default_atol` of the dtype (``1e-6`` in float64).
 
     Returns:
-        ``(..., 4)`` unit quaternion (sign not canonicalised).
+        ``(..., 4)`` unit quaternion (sign not canonicalised: where two of Shepperd's
+        pivots tie, a tiny change of ``matrix`` can flip it from ``q`` to ``−q``; a loss
+        on quaternion components should use a sign-invariant distance such as
+        :func:`~jrigid.quaternion.distance`).
 
     Raises:
-        ValueError: wrong shape (always); with concrete input, a matrix that is not
-            orthogonal within ``atol`` or that is a reflection.
+        ValueError: wrong shape or an ``atol`` outside ``[0, 0.1]`` (always); with
+            concrete input, a matrix that is not orthogonal within ``atol`` or that is a
+            reflection.
     """
     m = matrix_arg(matrix)
+    if atol is not None:
+        check_tolerance("from_matrix: atol (the orthogonality tolerance)", atol, MAX_ATOL)
     tol = default_atol(m.dtype) if atol is None else atol
     gram = jnp.swapaxes(m, -1, -2) @ m
     eye = jnp.broadcast_to(jnp.eye(3, dtype=m.dtype), gram.shape)
