@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Annotated
 
 import jax
 import jax.numpy as jnp
@@ -36,6 +37,7 @@ import numpy as np
 
 from jrigid import ensemble, inertia, stability
 from jrigid.ensemble import storage
+from jrigid.experiment_parameters import POSITIVE
 from jrigid.report import Report
 from jrigid.viz import stability as vs
 
@@ -71,14 +73,14 @@ def main(
     out_dir,
     quick: bool = False,
     *,
-    sides: tuple = (1.0, 2.0, 3.0),
-    n_directions: int = 10_000,
+    sides: Annotated[tuple, POSITIVE] = (1.0, 2.0, 3.0),
+    n_directions: Annotated[int, POSITIVE] = 10_000,
     mode: str = "speed",
-    periods: float = 50.0,
-    samples_per_period: int = 10,
-    ftle_periods: float = 1.0,
-    rtol: float = 1e-8,
-    chunk_size: int = 1024,
+    periods: Annotated[float, POSITIVE] = 50.0,
+    samples_per_period: Annotated[int, POSITIVE] = 10,
+    ftle_periods: Annotated[float, POSITIVE] = 1.0,
+    rtol: Annotated[float, POSITIVE] = 1e-8,
+    chunk_size: Annotated[int, POSITIVE] = 1024,
     sort: bool = True,
     workers: int = 0,
     scheduler: str = "",
@@ -144,20 +146,27 @@ def main(
     with ensemble.executor(workers=workers, scheduler=scheduler) as pool:
         out = _sweep(member, omega0, order, chunk_size, chunks, info, pool, settings)
 
-    d = np.asarray(dirs)
+    ok = out["result"] == 0
+    if not ok.any():
+        codes = sorted({int(c) for c in np.unique(out["result"])})
+        raise RuntimeError(f"stability_map: every one of the {n_directions} solves failed "
+                           f"(result codes {codes}, jrigid.Result): no map to draw")
+    steps = np.asarray(out["num_steps"])  # every member's, for the lockstep efficiency
+    # a failed member (flips -1, NaN angles) is left out of every statistic, and counted
+    d, out = np.asarray(dirs)[ok], {k: np.asarray(v)[ok] for k, v in out.items()}
     unstable = out["flips"] > 0
     caps = {
         name: np.abs(d[:, k]) > math.cos(math.radians(CAP_DEG))
         for name, k in (("smallest", lo), ("intermediate", mid), ("largest", hi))
     }
-    steps = out["num_steps"]
     numbers = {
         "moments": mom,
         "axes_smallest_intermediate_largest": [lo + 1, mid + 1, hi + 1],
         "n_directions": n_directions,
         "mode": mode,
         "periods": periods,
-        "all_succeeded": bool(np.all(out["result"] == 0)),
+        "all_succeeded": bool(ok.all()),
+        "failed_members": int((~ok).sum()),
         "fraction_unstable": float(unstable.mean()),
         "fraction_unstable_closed_form": float(out["flips_expected"].mean()),
         "classification_agreement": float(np.mean(unstable == out["flips_expected"])),
@@ -174,7 +183,8 @@ def main(
         "ftle_median_unstable": float(np.median(out["ftle"][unstable])),
         "ftle_median_stable": float(np.median(out["ftle"][~unstable])),
         "first_flip_median": float(np.median(out["first_flip"][unstable])),
-        "steps_min_median_max": [int(steps.min()), int(np.median(steps)), int(steps.max())],
+        "steps_min_median_max": [int(out["num_steps"].min()), int(np.median(out["num_steps"])),
+                                 int(out["num_steps"].max())],
         "lockstep_efficiency_this_run": float(
             stability.lockstep_efficiency(steps, chunk_size, order)
         ),
@@ -199,6 +209,10 @@ def main(
         + " / ".join(f"{numbers['cap_ftle'][n]['median']:.3f}" for n in caps)
         + f" (saddle rate λ = {numbers['saddle_rate_lambda']:.3f})."
     )
+    if not ok.all():
+        rep.text(f"**{numbers['failed_members']} of the {n_directions} solves failed** "
+                 "(their result codes are in the chunks) and are left out of every number "
+                 "and of the map.")
     rep.table(
         [
             (
@@ -242,9 +256,10 @@ def main(
         rep.figure("map_angle_ftle", fig, caption="the same, two quantities", show=False)
     rep.numbers(numbers)
     rep.write_summary()
+    failed = f", {numbers['failed_members']} solves failed" if not ok.all() else ""
     print(
         f"stability_map: {100 * numbers['fraction_unstable']:.1f}% unstable, agreement "
-        f"{numbers['classification_agreement']:.4f}"
+        f"{numbers['classification_agreement']:.4f}{failed}"
     )
     return numbers
 

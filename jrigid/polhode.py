@@ -25,7 +25,7 @@ from jax.typing import ArrayLike
 from jrigid import inertia
 from jrigid._checks import as_floats, check_shape, fail_if
 
-__all__ = ["encircled_axis", "omega_at_energy", "polhode", "polhode_family"]
+__all__ = ["encircled_axis", "omega_at_energy", "polhode", "polhode_family", "separatrix_offset"]
 
 
 def _moments(moments: ArrayLike, *, single: bool = False) -> jax.Array:
@@ -84,12 +84,35 @@ def encircled_axis(moments: ArrayLike, omega: ArrayLike) -> jax.Array:
     Returns:
         ``(...)`` int32 (the broadcast batch shape).
     """
+    delta, order = _offset(moments, omega)
+    return jnp.where(delta >= 0, order[..., 2], order[..., 0]).astype(jnp.int32)
+
+
+def separatrix_offset(moments: ArrayLike, omega: ArrayLike) -> jax.Array:
+    """``L² − 2E I_mid = Σ_k I_k (I_k − I_mid) ω_k²`` (closed form, free of cancellation).
+
+    Positive where the polhode through ``omega`` goes round the axis of largest moment,
+    negative round the smallest, zero on the separatrix and for every steady spin whose
+    axis is not isolated (about the intermediate axis; any spin of a sphere; a symmetric
+    body spun in its equatorial plane).
+
+    Args:
+        moments: ``(..., 3)`` principal moments, any order, positive.
+        omega: ``(..., 3)`` body angular velocity.
+
+    Returns:
+        ``(...)`` (the broadcast batch shape).
+    """
+    return _offset(moments, omega)[0]
+
+
+def _offset(moments, omega):
+    """``(L² − 2E I_mid, argsort of the moments)``."""
     i, w = as_floats(_moments(moments), _omega(omega, "omega"))
     i, w = jnp.broadcast_arrays(i, w)
     order = jnp.argsort(i, axis=-1)
     i_mid = jnp.take_along_axis(i, order[..., 1:2], axis=-1)
-    delta = jnp.sum(i * (i - i_mid) * w * w, axis=-1)
-    return jnp.where(delta >= 0, order[..., 2], order[..., 0]).astype(jnp.int32)
+    return jnp.sum(i * (i - i_mid) * w * w, axis=-1), order
 
 
 def polhode(moments: ArrayLike, omega0: ArrayLike, n: int = 200) -> jax.Array:

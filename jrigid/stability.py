@@ -54,12 +54,21 @@ from jax.typing import ArrayLike
 
 from jrigid import initial
 from jrigid import quaternion as quat
+from jrigid._checks import float_dtype
 from jrigid.body import RigidBody
 from jrigid.ensemble.schedule import difficulty_order, lockstep_efficiency
 from jrigid.ftle import ftle_exact, ftle_simulate
 from jrigid.integrate import simulate
-from jrigid.polhode import encircled_axis, omega_at_energy, polhode, polhode_family
+from jrigid.polhode import (
+    encircled_axis,
+    omega_at_energy,
+    polhode,
+    polhode_family,
+    separatrix_offset,
+)
 from jrigid.scene import Scene
+from jrigid.solve import validate_shared
+from jrigid.trajectory import Result
 
 __all__ = [
     "axis_angle",
@@ -127,15 +136,21 @@ def flips_expected(moments: ArrayLike, omega: ArrayLike) -> jax.Array:
     True when the nearest principal axis is not the one the polhode encircles: its body
     component of ω then oscillates about zero (``cn`` or ``sn``) and changes sign twice
     per period of ω. This is the classification a long enough simulation must reproduce.
+    False where ``L² = 2E I_mid`` exactly: a steady spin (about a principal axis, the
+    intermediate one included; any spin of a sphere; a symmetric body spun in its
+    equatorial plane) or the separatrix itself, where no axis turns over periodically.
 
     Args:
-        moments: ``(..., 3)`` distinct principal moments.
+        moments: ``(..., 3)`` principal moments, any order, positive (equal ones
+            allowed: a symmetric body's equatorial axes turn over about its symmetry
+            axis, a sphere's never).
         omega: ``(..., 3)`` body angular velocity.
 
     Returns:
         ``(...)`` bool (the broadcast batch shape).
     """
-    return nearest_axis(omega) != encircled_axis(moments, omega)
+    steady = separatrix_offset(moments, omega) == 0
+    return (nearest_axis(omega) != encircled_axis(moments, omega)) & ~steady
 
 
 # --------------------------------------------------------------------------- per trajectory
@@ -265,7 +280,13 @@ def map_member(
     Returns:
         dict of scalars: the keys of :func:`trajectory_summary` plus ``ftle``,
         ``flips_expected``, ``num_steps`` (accepted + rejected) and ``result``
-        (:class:`jrigid.integrate.Result` code).
+        (:class:`jrigid.integrate.Result` code). A member whose solve failed
+        (``result != 0``) has ``flips = -1`` and NaN ``first_flip`` and
+        ``max_axis_angle``; ``ftle`` and ``flips_expected`` are closed forms, kept.
+
+    Raises:
+        ValueError: concrete ``ts``, ``rtol`` or ``atol`` that no solve can run with (as
+            :func:`jrigid.simulate`'s message), before anything is traced.
 
     Example: a map of two directions, near the intermediate and the largest axis of a
     body with moments 1, 2, 3 (for thousands, run it with :func:`jrigid.ensemble.run`)::
@@ -286,6 +307,8 @@ def map_member(
         True
     """
     moments, omega0 = jnp.asarray(moments), jnp.asarray(omega0)
+    dtype = moments.dtype if jnp.issubdtype(moments.dtype, jnp.floating) else float_dtype()
+    validate_shared(ts, rtol, atol, dtype)  # settings no member can run with: raise now
     traj = simulate(
         Scene(RigidBody(moments)),
         initial.from_omega(None, omega0),
@@ -297,6 +320,11 @@ def map_member(
         throw=False,
     )
     out = trajectory_summary(traj.ts, traj.q, traj.omega)
+    # a member whose solve failed has no flips to count: -1 and NaN, not "stable"
+    failed = traj.result != Result.success
+    out["flips"] = jnp.where(failed, -1, out["flips"])
+    out["first_flip"] = jnp.where(failed, jnp.nan, out["first_flip"])
+    out["max_axis_angle"] = jnp.where(failed, jnp.nan, out["max_axis_angle"])
     out["ftle"] = ftle_exact(moments, omega0, ftle_time)
     out["flips_expected"] = flips_expected(moments, omega0)
     out["num_steps"] = traj.stats["num_steps"]

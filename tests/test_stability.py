@@ -21,7 +21,7 @@ from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 from scipy.spatial.transform import Rotation
 
-from jrigid import stability
+from jrigid import stability, theory
 
 # Bodies (I1, I2, I3) with distinct moments: a box of sides 1, 2, 3, a T-handle-like body
 # and a near-symmetric one (I1 ≈ I2).
@@ -380,3 +380,47 @@ def test_ftle_of_a_failed_solve_is_nan_and_bad_horizons_are_refused():
     tilted = jnp.array([[0, 1, 0], [1, 2, 0]])
     assert np.asarray(ftle(moments, tilted, 0.5)) == pytest.approx(
         np.asarray(ftle(moments, tilted.astype(float), 0.5)))
+
+
+def test_flips_expected_of_steady_spins_and_degenerate_bodies_matches_simulation():
+    """A sphere, an exact spin about the intermediate axis and a symmetric body spun in its
+    equatorial plane rotate steadily (L² = 2E I_mid exactly): no flips expected, and the
+    solver counts none; a symmetric body spun off its equator turns its equatorial axes
+    over, which the closed form and the solver both see."""
+    ts = jnp.linspace(0.0, 100.0, 1001)
+    cases = [  # moments, ω0, flips expected
+        ((1.0, 1.0, 1.0), (1.0, 0.01, 0.02), False),
+        ((1.0, 2.0, 3.0), (0.0, 1.0, 0.0), False),
+        ((1.0, 1.0, 2.0), (1.0, 0.0, 0.0), False),
+        ((1.0, 1.0, 2.0), (1.0, 0.0, 0.1), True),
+        ((1.0, 2.0, 3.0), (0.05, 1.0, 0.05), True),
+    ]
+    for moments, w, expected in cases:
+        moments, w = jnp.array(moments), jnp.array(w)
+        assert bool(stability.flips_expected(moments, w)) is expected, (moments, w)
+        flips = int(stability.map_member(moments, w, ts, 1.0)["flips"])
+        assert (flips > 0) is expected, (moments, w, flips)
+    assert float(stability.separatrix_offset(jnp.array([1.0, 2.0, 3.0]),
+                                             jnp.array([0.0, 1.0, 0.0]))) == 0.0
+
+
+def test_a_failed_member_is_not_counted_stable_and_bad_settings_raise():
+    """A solve that fails reported 0 flips (a stable direction on the map); settings no
+    solve can run with were flagged per member instead of refused."""
+    moments, w = jnp.array([1.0, 2.0, 3.0]), jnp.array([0.1, 1.0, 0.05])
+    ts = jnp.linspace(0.0, 50.0, 101)
+    out = stability.map_member(moments, w, ts, 1.0, max_steps=5)
+    assert int(out["result"]) != 0 and int(out["flips"]) == -1
+    assert np.isnan(float(out["first_flip"])) and np.isnan(float(out["max_axis_angle"]))
+    for rtol in (-1.0, 0.0, 2.0):
+        with pytest.raises(ValueError, match="rtol must be finite"):
+            stability.map_member(moments, w, ts, 1.0, rtol=rtol)
+
+
+@pytest.mark.parametrize("moments", [(1.0, 1.0, 2.0), (1.0, 2.0, 2.0), (1.0, 1.0, 1.0)])
+def test_flip_intervals_need_distinct_moments(moments):
+    """Two equal moments: no intermediate axis, no flip interval (was ±inf or NaN)."""
+    with pytest.raises(ValueError, match="moments must be distinct"):
+        stability.flip_time_asymptotic(jnp.array(moments), 1.0, 0.01)
+    with pytest.raises(ValueError, match="moments must be distinct"):
+        theory.flip_interval(jnp.array(moments), jnp.array([0.01, 1.0, 0.0]))

@@ -28,6 +28,17 @@ __all__ = [
 _TWO_PI = 2.0 * math.pi
 
 
+def _distinct(moments: jax.Array) -> jax.Array:
+    """``moments (..., 3)``, failing (:func:`~jrigid._checks.fail_if`) where two are equal:
+    such a body has no intermediate axis, so no flips and no flip interval."""
+    i = moments
+    same = (i[..., 0] == i[..., 1]) | (i[..., 1] == i[..., 2]) | (i[..., 0] == i[..., 2])
+    return fail_if(
+        moments, same,
+        "moments must be distinct: a body with two equal moments has no intermediate "
+        "axis, so no flip interval", lambda: f"moments {moments}")
+
+
 def _body(moments: ArrayLike, omega: ArrayLike, *, symmetric: bool = False):
     """``moments`` and ``omega`` as float arrays, checked: each ``(..., 3)``, the moments
     finite and positive and, if ``symmetric``, with ``I1 = I2`` (to ``√eps`` relative)."""
@@ -232,7 +243,8 @@ def flip_theory(moments: ArrayLike, omega: ArrayLike) -> dict:
     closed-form motion.
 
     Args:
-        moments: ``(..., 3)`` distinct principal moments (any order), positive.
+        moments: ``(..., 3)`` distinct principal moments (any order), positive (two
+            equal ones raise ``ValueError``; under ``jit``, at run time).
         omega: ``(..., 3)`` body angular velocity at any instant.
 
     Returns:
@@ -249,6 +261,7 @@ def flip_theory(moments: ArrayLike, omega: ArrayLike) -> dict:
         1 18.8519
     """
     moments, omega = _body(moments, omega)
+    moments = _distinct(moments)
     moments, omega = jnp.broadcast_arrays(moments, omega)
     order = jnp.argsort(jax.lax.stop_gradient(moments), axis=-1)
     moments = jnp.take_along_axis(moments, order, axis=-1)
@@ -279,7 +292,8 @@ def flip_interval(moments: ArrayLike, omega: ArrayLike) -> jax.Array:
     """``2K(m)/λ``, the time between flips of a body spun near its intermediate axis.
 
     Args:
-        moments: ``(..., 3)`` distinct principal moments (any order), positive.
+        moments: ``(..., 3)`` distinct principal moments (any order), positive (two
+            equal ones raise ``ValueError``; under ``jit``, at run time).
         omega: ``(..., 3)`` body angular velocity at any instant.
 
     Returns:
@@ -311,7 +325,8 @@ def flip_interval_asymptotic(
         C = 4 √(I2(I3−I2)/(I1(I3−I1)))   (toward the smallest).
 
     Args:
-        moments: ``(..., 3)`` distinct principal moments, any order, positive.
+        moments: ``(..., 3)`` distinct principal moments, any order, positive (two equal
+            ones raise ``ValueError``; under ``jit``, at run time).
         speed: ``(...)`` ``|ω|``.
         eps: ``(...)`` tilt angle(s) in radians.
         toward: ``"largest"`` or ``"smallest"`` (static).
@@ -329,7 +344,7 @@ def flip_interval_asymptotic(
     if toward not in ("largest", "smallest"):
         raise ValueError(f"toward must be 'largest' or 'smallest', got {toward!r}")
     moments, speed, eps = as_floats(moments, speed, eps)
-    moments = inertia.checked_moments(moments, allow_nonphysical=True)
+    moments = _distinct(inertia.checked_moments(moments, allow_nonphysical=True))
     s = jnp.sort(moments, axis=-1)
     i1, i2, i3 = s[..., 0], s[..., 1], s[..., 2]
     lam = speed * jnp.sqrt((i3 - i2) * (i2 - i1) / (i1 * i3))
