@@ -24,7 +24,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jrigid import exact, fit, initial, viz
+from jrigid import exact, fit, inertia, initial, viz
 from jrigid.body import RigidBody
 from jrigid.report import Report
 from jrigid.scene import Scene
@@ -129,7 +129,7 @@ def main(
     """
     if model not in ("exact", "simulate"):
         raise ValueError(f"model must be 'exact' or 'simulate', got {model!r}")
-    m_true = np.asarray(moments, dtype=float)
+    m_true = np.asarray(inertia.checked_moments(np.asarray(moments, dtype=float)))  # physical
     m_true = m_true / m_true.sum()
     w_true = np.asarray(omega0, dtype=float)
     if quick:

@@ -500,10 +500,16 @@ def simulate(
             constraints only; ``False``: nothing.
         dense: keep the dense interpolation for :meth:`Trajectory.at`.
         throw: raise on failure (see the module docstring); ``False`` returns the
-            :class:`~jrigid.trajectory.Result` code in ``Trajectory.result``.
+            :class:`~jrigid.trajectory.Result` code in ``Trajectory.result`` (a member
+            with bad inputs under ``vmap``: ``invalid_input``, the others solved). The
+            helpers of :mod:`jrigid.initial` check their own inputs and raise, under
+            ``jit`` too: for a sweep whose members may be bad, build states with
+            :class:`~jrigid.state.State` or use :func:`jrigid.ensemble.simulate_many`.
         saveat: a ``diffrax.SaveAt`` instead of ``SaveAt(ts=ts)`` (e.g. ``steps=True``;
             ``ts`` then only gives the time span). The trajectory's ``ts`` are the saved
-            times (diffrax's unfilled slots become NaN).
+            times (diffrax's unfilled slots become NaN: ``steps=True`` gives
+            ``max_steps`` rows, the end of each accepted step, not ``ts[0]``, then NaN;
+            lower ``max_steps`` or drop the NaN rows).
         stepsize_controller: a diffrax controller instead of the PID controller built
             from ``rtol``/``atol`` (e.g. ``diffrax.ConstantStepSize()`` with ``dt0``).
             It steps to its own tolerances, as diffrax's controllers do (error
@@ -594,6 +600,12 @@ def simulate(
             )
         if isinstance(stepsize_controller, diffrax.ConstantStepSize) and dt0 is None:
             raise ValueError("a ConstantStepSize controller needs dt0 (the step)")
+    elif not isinstance(solver, diffrax.AbstractAdaptiveSolver):
+        raise ValueError(
+            f"{type(solver).__name__} gives no error estimate, so jrigid's adaptive "
+            "step-size controller cannot step it: pass "
+            "stepsize_controller=diffrax.ConstantStepSize() and dt0 (the step)"
+        )
     if event is not None:
         if not isinstance(event, diffrax.Event):
             raise ValueError(f"event must be a diffrax.Event, got {event!r}")

@@ -137,6 +137,8 @@ def test_unknown_experiment_exits_2_and_lists_valid_names(capsys):
         (["run"], "NAME is required"),
         (["demo", "fps=0"], "parameter 'fps'"),
         (["demo", "frames=-3"], "parameter 'frames'"),
+        (["run", "stability_map", "rtol=-1", "--quick"], "parameter 'rtol'"),
+        (["run", "stability_map", "n_directions=0", "--quick"], "parameter 'n_directions'"),
     ],
 )
 def test_bad_parameters_exit_2_and_say_what_is_valid(argv, message, capsys):
@@ -183,6 +185,8 @@ def test_a_value_the_experiment_refuses_exits_2_with_one_line(capsys, tmp_path):
 
 
 @pytest.mark.parametrize("argv, message", [
+    (["run", "stability_map", "rtol=2", "--quick"], "rtol must be finite, > 0 and < 1"),
+    (["run", "fit_tumbling", "moments=1,2,10", "--quick"], "triangle inequality"),
     (["demo", "tilt_deg=0"], "tilt_deg must be in (0, 90)"),
     (["demo", "frames=1"], "frames >= 2"),
     (["run", "hello", "samples=0"], "samples must be >= 3"),

@@ -464,6 +464,9 @@ def test_fixed_step_solvers_through_constant_step_size():
     with pytest.raises(ValueError, match="dt0"):
         simulate(scene, state, ts, solver=diffrax.Euler(),
                  stepsize_controller=diffrax.ConstantStepSize())
+    # without a controller: diffrax's RuntimeError from inside its loop, now jrigid's own
+    with pytest.raises(ValueError, match="Euler gives no error estimate.*ConstantStepSize"):
+        simulate(scene, state, ts, solver=diffrax.Euler(), dt0=0.01)
 
 
 def test_user_event_stops_without_failing():
