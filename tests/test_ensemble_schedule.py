@@ -42,3 +42,8 @@ def test_lockstep_efficiency_refuses_a_bad_chunk_size(chunk_size):
 def test_difficulty_order_needs_one_number_per_member():
     with pytest.raises(ValueError, match=r"\(N,\)"):
         schedule.difficulty_order(np.ones((2, 3)))
+
+
+def test_lockstep_efficiency_of_members_that_took_no_step_is_one():
+    """All-zero step counts gave 0/0 = NaN, outside the documented (0, 1]."""
+    assert float(schedule.lockstep_efficiency(np.array([0, 0, 0]), 2)) == 1.0

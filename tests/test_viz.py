@@ -492,3 +492,29 @@ def test_stability_drawings_need_one_value_per_direction():
                     draw(ax, dirs, bad, moments, resolution=8)
     finally:
         plt.close(fig)
+
+
+def test_samples_that_are_not_finite_are_left_out_with_a_warning():
+    """One NaN row made np.unwrap blank every later Euler angle; a failed solve's NaN tail
+    gave a misleading 'axis vector is zero' in the precession plot and an internal JAX
+    error in the views; a zero quaternion in body_still the same."""
+    data, _ = _symmetric_top()
+    clean = viz.plot_euler_angles(data)
+    broken = {k: np.array(v, float).copy() for k, v in data.items()}
+    broken["q"][50] = np.nan
+    with pytest.warns(viz.DroppedSamplesWarning, match="1 of 200 samples"):
+        fig = viz.plot_euler_angles(broken)
+    for line, ref in zip(fig.axes[0].lines, clean.axes[0].lines, strict=True):
+        y = line.get_ydata()
+        assert y.shape == (199,) and np.all(np.isfinite(y))
+        np.testing.assert_allclose(y, np.delete(ref.get_ydata(), 50), atol=1e-9)
+    tail = {k: np.array(v, float).copy() for k, v in data.items()}
+    tail["q"][120:], tail["omega"][120:], tail["ts"][150:] = np.nan, np.nan, np.nan
+    with pytest.warns(viz.DroppedSamplesWarning, match="80 of 200 samples"):
+        viz.plot_precession_nutation(tail)
+    with pytest.warns(viz.DroppedSamplesWarning):
+        viz.space_body_views(tail, shapes.box(1.0, 0.6, 0.3))
+    with pytest.raises(ValueError, match="no usable sample"):
+        viz.plot_euler_angles({"ts": np.zeros(2), "q": np.full((2, 4), np.nan)})
+    with pytest.raises(ValueError, match="zero quaternion"):
+        viz.body_still(shapes.box(1.0, 0.5, 0.2), np.zeros(4))

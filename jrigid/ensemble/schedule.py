@@ -37,7 +37,7 @@ def lockstep_efficiency(
             default the given order.
 
     Returns:
-        ``()`` efficiency in ``(0, 1]``.
+        ``()`` efficiency in ``(0, 1]`` (1 when no member took a step).
 
     Example: two chunks of two, one slow member in each or both in one::
 
@@ -68,7 +68,8 @@ def lockstep_efficiency(
     padded = jnp.concatenate([s, jnp.full((pad,), -jnp.inf, s.dtype)]).reshape(n_chunks, -1)
     counts = jnp.sum(jnp.isfinite(padded), axis=1)
     executed = jnp.sum(counts * jnp.max(padded, axis=1))
-    return jnp.sum(s) / executed
+    # no member took a step (every solve empty): nothing was wasted
+    return jnp.where(executed > 0, jnp.sum(s) / jnp.where(executed > 0, executed, 1.0), 1.0)
 
 
 def difficulty_order(difficulty: ArrayLike) -> jax.Array:

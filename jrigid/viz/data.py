@@ -12,10 +12,15 @@ momentum ``L``/``L_body``; space-frame ``omega_space``, ``L_space``; ``energy``,
 ``(3,)`` (or ``scene.body.moments`` of a :class:`jrigid.trajectory.Trajectory`).
 Missing quantities are derived with :mod:`jrigid.quaternion` where possible
 (``L = I ω`` needs the moments; pass ``moments=`` if the data lack them).
+
+Samples with a non-finite time, a non-finite or zero quaternion or a non-finite rate
+(the tail of a failed solve, the NaN padding of ``SaveAt(steps=True)``) are left out,
+with a :class:`DroppedSamplesWarning`; data with no sample left raise ``ValueError``.
 """
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from typing import Any
@@ -28,7 +33,12 @@ from jrigid import quaternion as quat
 
 from ._jit import bucket, float_dtype, pad
 
-__all__ = ["Series", "as_series", "resample", "turn_angles"]
+__all__ = ["DroppedSamplesWarning", "Series", "as_series", "resample", "turn_angles"]
+
+
+class DroppedSamplesWarning(UserWarning):
+    """Samples of the data were left out of a drawing: their time, orientation or rates
+    were not finite (or the quaternion was zero)."""
 
 _ALIASES = {
     "ts": ("ts", "t", "times", "time"),
@@ -166,7 +176,11 @@ def as_series(data: Any, moments=None) -> Series:
     for k, v in given.items():
         if v is not None and v.shape != (T, 3):
             raise ValueError(f"`{k}` must have shape ({T}, 3) to match q, got {v.shape}")
-    n = bucket(T)
+    keep = _usable(ts, q_raw, given.values())
+    if not keep.all():
+        ts, q_raw = ts[keep], q_raw[keep]
+        given = {k: None if v is None else v[keep] for k, v in given.items()}
+    n = bucket(len(ts))
     dt = float_dtype()
 
     def j(x, fill=0.0):
@@ -177,15 +191,34 @@ def as_series(data: Any, moments=None) -> Series:
         *(j(given[k]) for k in ("omega", "omega_space", "L", "L_space")),
         None if m is None else jnp.asarray(m, dtype=dt),
     )
-    d = {k: (None if v is None else np.asarray(v, dtype=float)[:T]) for k, v in d.items()}
+    d = {k: (None if v is None else np.asarray(v, dtype=float)[: len(ts)]) for k, v in d.items()}
     out = Series(ts=ts, q_raw=q_raw, moments=m, **d)
     for key in ("energy", "kinetic_energy", "q_norm_error"):
         given_value = _np(_lookup(data, key))
         if given_value is not None:
-            setattr(out, key, given_value)
+            setattr(out, key, given_value[keep] if given_value.shape == (T,) else given_value)
     if out.energy is None:
         out.energy = out.kinetic_energy
     return out
+
+
+def _usable(ts, q_raw, rates) -> np.ndarray:
+    """``(T,)`` bool: the samples with a finite time, a finite non-zero quaternion and
+    finite rates; warns (:class:`DroppedSamplesWarning`) when some are not, raises
+    ``ValueError`` when none is."""
+    keep = np.isfinite(ts) & np.all(np.isfinite(q_raw), axis=-1) & np.any(q_raw != 0, axis=-1)
+    for v in rates:
+        if v is not None:
+            keep &= np.all(np.isfinite(v), axis=-1)
+    if not keep.any():
+        raise ValueError(f"data have no usable sample among {len(keep)}: every one has a "
+                         "non-finite time, orientation or rate, or a zero quaternion")
+    if not keep.all():
+        warnings.warn(
+            f"{int((~keep).sum())} of {len(keep)} samples have a non-finite time, orientation "
+            "or rate (or a zero quaternion) and are left out: the tail of a failed solve, "
+            "or SaveAt(steps=True)'s padding", DroppedSamplesWarning, stacklevel=4)
+    return keep
 
 
 @jax.jit

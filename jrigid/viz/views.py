@@ -23,6 +23,8 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
+from jrigid import quaternion as quat
+
 from ._figure import new_figure
 from .data import Series, as_series
 from .render import (
@@ -264,7 +266,8 @@ def body_still(
         the ``Figure``.
     """
     camera = Camera() if camera is None else camera
-    q = np.array([1.0, 0.0, 0.0, 0.0]) if q is None else np.asarray(q, float)
+    q = np.array([1.0, 0.0, 0.0, 0.0]) if q is None else np.asarray(
+        quat.check_quaternion(np.asarray(q, float), unit=False), float)
     data = {"q": q[None], "ts": np.zeros(1)}
     if omega is not None:
         data["omega_space"] = np.asarray(omega, float)[None]
