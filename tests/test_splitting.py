@@ -269,6 +269,22 @@ def test_float32(float32):
 # --------------------------------------------------------------------------- selection and errors
 
 
+def test_a_torque_that_turns_nan_is_a_result_code_and_an_error():
+    """The closed-form free flow checked its own input, so a NaN the torque produced
+    raised 'exact: omega0 has non-finite entries' even with throw=False (and under vmap
+    stopped the batch)."""
+    scene = Scene(RigidBody(jnp.array([1.0, 2.0, 3.0])), FreeRotation(),
+                  (Torque(lambda t, kin, p: p * jnp.ones(3), float("nan")),))
+    state = initial.from_omega(None, jnp.array([0.1, 0.2, 5.0]))
+    ts = jnp.linspace(0.0, 1.0, 3)
+    traj = simulate(scene, state, ts, solver=Splitting(dt=0.1), throw=False)
+    assert int(traj.result) == Result.nonfinite
+    assert np.all(np.isfinite(np.asarray(traj.omega[0])))
+    assert np.all(np.isnan(np.asarray(traj.omega[1:])))
+    with pytest.raises(SimulationError, match="non-finite"):
+        simulate(scene, state, ts, solver=Splitting(dt=0.1))
+
+
 def test_too_many_steps_is_a_result_code_and_an_error():
     state = initial.from_omega(Q0, SYMMETRIC_W0)
     ts = TS.at[60:].add(1e4)  # interval 59 needs more than BOUND steps of 0.1

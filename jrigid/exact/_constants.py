@@ -91,8 +91,9 @@ class ExactConstants(NamedTuple):
     rest: jax.Array  # bool: omega0 = 0
 
 
-def _as_inputs(moments, q0, omega0, allow_nonphysical):
-    """Checked arrays of one floating dtype (``ValueError`` now, or ``error_if`` if traced)."""
+def _as_inputs(moments, q0, omega0, allow_nonphysical, checked=True):
+    """Checked arrays of one floating dtype (``ValueError`` now, or ``error_if`` if traced;
+    with ``checked=False`` the values are not checked, only the shapes)."""
     moments, q0, omega0 = (jnp.asarray(x) for x in (moments, q0, omega0))
     dtype = jnp.result_type(moments, q0, omega0)
     if not jnp.issubdtype(dtype, jnp.inexact):
@@ -104,6 +105,8 @@ def _as_inputs(moments, q0, omega0, allow_nonphysical):
     if omega0.shape[-1:] != (3,):
         raise ValueError(f"omega0 must have shape (..., 3), got {omega0.shape}")
     moments, q0, omega0 = (x.astype(dtype) for x in (moments, q0, omega0))
+    if not checked:
+        return moments, q0, omega0
     try:
         moments = _now_if_concrete(
             lambda x: inertia_checks.validate(
@@ -305,7 +308,8 @@ def _general(ic, wc, regime_a, delta2):
 
 
 def prepare(
-    moments: ArrayLike, q0: ArrayLike, omega0: ArrayLike, *, allow_nonphysical: bool = True
+    moments: ArrayLike, q0: ArrayLike, omega0: ArrayLike, *, allow_nonphysical: bool = True,
+    checked: bool = True,
 ) -> ExactConstants:
     """Constants of the torque-free motion of a body (batched over leading dimensions).
 
@@ -319,6 +323,9 @@ def prepare(
             needs no more (e.g. the Hairer-Nørsett-Wanner body ``(0.5, 2, 3)``); ``False``:
             also require the triangle inequality ``Ia + Ib ≥ Ic``, as
             :class:`jrigid.body.RigidBody` does by default.
+        checked: ``False``: the values are not checked (non-finite input gives NaN
+            constants), for a caller that checks its own inputs and flags non-finite
+            results (the splitting integrator, whose state may diverge under a torque).
 
     Returns:
         :class:`ExactConstants` with batch shape the broadcast of the three batch shapes.
@@ -334,7 +341,7 @@ def prepare(
     ``1e-14``, and of order one at ``1e-17``; values are accurate). ``simulate(...,
     solver="exact")`` sets components at the level of rounding (``8 eps |ω|``) to zero.
     """
-    return _prepare(*_as_inputs(moments, q0, omega0, allow_nonphysical))
+    return _prepare(*_as_inputs(moments, q0, omega0, allow_nonphysical, checked))
 
 
 @jax.jit
