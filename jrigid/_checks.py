@@ -114,6 +114,18 @@ def check_tolerance(name: str, value, high: float) -> None:
         raise ValueError(f"{name} must be a number in [0, {high:g}], got {value!r}")
 
 
+#: The most steps a fixed-step loop takes in one output interval (its counters are int32).
+MAX_INTERVAL_STEPS = 2**31 - 1
+
+
+def check_interval_steps(count: float, dt) -> None:
+    """``ValueError`` naming ``dt`` when ``count`` steps per output interval (a concrete
+    number) exceed :data:`MAX_INTERVAL_STEPS`."""
+    if np.isfinite(count) and count > MAX_INTERVAL_STEPS:
+        raise ValueError(f"dt={float(dt):g} needs {count:.3g} steps in an output interval, "
+                         f"more than {MAX_INTERVAL_STEPS} (a step counter's range): raise dt")
+
+
 def is_traced(*trees) -> bool:
     """True if any leaf of the arguments is a JAX tracer (inside jit, vmap, grad, ...)."""
     return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(trees))

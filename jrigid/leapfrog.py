@@ -32,6 +32,7 @@ from jax.typing import ArrayLike
 
 from jrigid import linalg
 from jrigid import quaternion as quat
+from jrigid._checks import check_interval_steps
 from jrigid.formulations import AbstractFormulation
 from jrigid.scene import Scene
 from jrigid.solve import finish_sampled, guard, input_checks, normalised, prepare, validate
@@ -170,6 +171,7 @@ def _steps_bound(ts, dt) -> tuple[int, bool] | None:
     if isinstance(ts, jax.core.Tracer) or isinstance(dt, jax.core.Tracer):
         return None
     counts = _step_counts(np.diff(np.asarray(ts)), np.asarray(dt), np)
+    check_interval_steps(float(np.max(counts, initial=1.0)), dt)
     return int(counts.max()), bool(counts.min() == counts.max())
 
 

@@ -61,7 +61,7 @@ import numpy as np
 
 from jrigid import exact, inertia
 from jrigid import quaternion as quat
-from jrigid._checks import is_traced
+from jrigid._checks import check_interval_steps, is_traced
 from jrigid.scene import Scene
 from jrigid.solve import finish_sampled, input_checks, normalised, screen
 from jrigid.state import Kinematics, State
@@ -214,6 +214,7 @@ class Splitting(eqx.Module):
         spans = np.diff(np.asarray(ts, dtype=np.float64))
         counts = np.ceil(spans / float(self.dt) - 1e-9)
         counts = counts[np.isfinite(counts)]
+        check_interval_steps(float(counts.max(initial=1)), self.dt)
         return max(1, int(counts.max(initial=1)))
 
 

@@ -112,3 +112,17 @@ def test_reverse_mode_through_the_steps(ts):
     fixed = leapfrog(Scene(RigidBody(m)), state, ts, dt=0.01)
     assert int(traced.stats["num_steps"]) == int(fixed.stats["num_steps"])
     np.testing.assert_allclose(traced.q, fixed.q, rtol=0, atol=1e-14)
+
+
+def test_a_step_too_small_to_count_is_refused():
+    """dt=1e-300 ended in OverflowError ('Python int too large to convert to C long')."""
+    from jrigid.integrate import simulate
+    from jrigid.splitting import Splitting
+
+    scene = Scene(RigidBody(jnp.array([1.0, 2.0, 3.0])))
+    state = initial.from_omega(Q0, OMEGA0)
+    ts = jnp.linspace(0.0, 1.0, 3)
+    with pytest.raises(ValueError, match="dt=1e-300 needs 5e.299 steps.*raise dt"):
+        leapfrog(scene, state, ts, dt=1e-300)
+    with pytest.raises(ValueError, match="dt=1e-300 needs 5e.299 steps.*raise dt"):
+        simulate(scene, state, ts, solver=Splitting(dt=1e-300))
