@@ -25,9 +25,11 @@ functions of :mod:`jrigid.impacts` are. It stops at the final time, after
 ``max_bounces`` contacts, or when contacts pile up: ``rapid_bounces`` consecutive
 contacts each less than ``min_gap`` after the previous one ("too many bounces in too
 short a time", status ``"resting"``); the body is then held still and the kinetic energy
-left (small) is reported as dropped. The model has impulses only, no sustained contact,
-so this is also where it stops when a box would go on sliding flat, or pivoting on an
-edge while it tips over.
+left is reported as dropped. The model has impulses only, no sustained contact,
+so this is also where it stops when a body would go on sliding or rolling along the
+floor, or pivoting on an edge while it tips over: then the dropped energy is not small,
+and a :class:`RestingWarning` says so (more than :data:`RESTING_ENERGY` of the largest
+kinetic energy at a contact).
 
 Errors: with concrete values bad input raises ``ValueError`` (:class:`Floor` at
 construction, :func:`simulate_bounces` before compiling).
@@ -36,6 +38,7 @@ construction, :func:`simulate_bounces` before compiling).
 from __future__ import annotations
 
 import math
+import warnings
 from typing import Any, ClassVar, NamedTuple
 
 import diffrax
@@ -70,7 +73,17 @@ from jrigid.solve import (
 from jrigid.state import State
 from jrigid.trajectory import Result, Trajectory
 
-__all__ = ["BounceRun", "Floor", "simulate_bounces"]
+__all__ = ["BounceRun", "Floor", "RestingWarning", "simulate_bounces"]
+
+#: The kinetic energy a ``"resting"`` stop may drop, relative to the largest kinetic
+#: energy the body had at a contact, before :class:`RestingWarning` says it was moving.
+RESTING_ENERGY = 1e-6
+
+
+class RestingWarning(UserWarning):
+    """A body held still at a ``"resting"`` stop was still moving along the floor (or
+    turning): the model has no sustained contact, so its sliding, rolling or tipping over
+    is not simulated."""
 
 
 # --------------------------------------------------------------------------- the floor
@@ -402,7 +415,8 @@ class BounceRun(NamedTuple):
             point; ``depth`` (how far the lowest point was below the floor).
         status: ``"t_end"``, ``"resting"``, ``"max_bounces"`` or ``"failed"``.
         t_stop: the final time for ``"t_end"``, else the time of the last contact.
-        dropped_energy: kinetic energy removed when the body was put to rest.
+        dropped_energy: kinetic energy removed when the body was put to rest (more than
+            :data:`RESTING_ENERGY` of the largest at a contact: a :class:`RestingWarning`).
         num_steps: solver steps over all segments.
     """
 
@@ -552,6 +566,14 @@ def simulate_bounces(
         if rapid >= rapid_bounces:
             status = "resting"
             dropped = float(np.sum(res["energy_after"][:2]))
+            moving = max(float(np.sum(r["energy_before"][:2])) for r in rows)
+            if dropped > RESTING_ENERGY * moving:
+                warnings.warn(
+                    f"contacts piled up at t={t_hit_f:.6g} while the body still had "
+                    f"{dropped:.3g} of kinetic energy ({dropped / moving:.2g} of its largest "
+                    "at a contact): it is held still there, but it was sliding, rolling or "
+                    "tipping along the floor, which impulses alone do not model",
+                    RestingWarning, stacklevel=2)
             rest = jax.device_get(_at_rest(scene, formulation, y))
             ys = _put(ys, np.nonzero(ts_np > t_hit_f)[0], rest)
             break

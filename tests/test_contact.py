@@ -10,6 +10,7 @@ experiment uses, so the compiled segment solver is shared.
 """
 
 import math
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -457,3 +458,20 @@ def test_bounce_trajectories_count_their_steps_as_simulate_does():
     stats = {k: int(v) for k, v in run.trajectory.stats.items()}
     assert stats["num_steps"] == run.num_steps > 0
     assert stats["num_accepted_steps"] + stats["num_rejected_steps"] == stats["num_steps"]
+
+
+def test_a_body_still_sliding_when_contacts_pile_up_is_held_still_with_a_warning():
+    """A ball sliding at 3 m/s without friction stopped as 'resting' (success) with its
+    4.5 J of horizontal kinetic energy dropped silently; one dropped straight down keeps
+    the quiet stop (the energy left is at rounding level)."""
+    scene = ball_scene(0.5, 0.5, 9.81)
+    sliding = initial.from_omega(None, (0.0, 0.0, 0.0), x=(0.0, 0.0, 2.0), v=(3.0, 0.0, 0.0))
+    with pytest.warns(contact.RestingWarning, match="sliding, rolling or tipping"):
+        run = contact.simulate_bounces(scene, sliding, jnp.linspace(0.0, 3.0, 31))
+    assert run.status == "resting"
+    assert run.dropped_energy == pytest.approx(0.5 * float(scene.body.mass) * 9.0, rel=1e-6)
+    still = initial.from_omega(None, (0.0, 0.0, 0.0), x=(0.0, 0.0, 2.0), v=(0.0, 0.0, 0.0))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", contact.RestingWarning)
+        assert contact.simulate_bounces(scene, still, jnp.linspace(0.0, 3.0, 31)).status == \
+            "resting"
