@@ -474,6 +474,7 @@ def simulate_bounces(
     Raises:
         ValueError: a scene without a floor or free flight, a start below the floor,
             bad tolerances (see :func:`jrigid.simulate`).
+        TypeError: traced inputs (inside ``jax.jit``, ``jax.grad`` or ``jax.vmap``).
 
     Example:
         A ball dropped from 1.5 m above the floor bounces once in the first second,
@@ -493,6 +494,11 @@ def simulate_bounces(
         >>> round(float(after[0] / before[0]), 3)
         -0.5
     """
+    if is_traced(scene, initial_state, ts, rtol, atol):
+        raise TypeError(
+            "simulate_bounces runs its segments and contacts from Python, so it cannot be "
+            "traced (jax.jit, jax.grad, jax.vmap): differentiate jrigid.impacts' functions "
+            "(contact_impulse, apply_impulse), or jrigid.simulate over a segment")
     formulation = get_formulation(formulation)
     if not formulation.carries_quaternion:
         raise ValueError("simulate_bounces needs a quaternion formulation")

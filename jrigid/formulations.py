@@ -359,9 +359,12 @@ class EulerState(eqx.Module):
 class EulerAngles(AbstractFormulation):
     """ZXZ Euler angles ``(φ, θ, ψ)`` with rates from (17.36) and ω̇ from (17.35).
 
-    Singular at ``sin θ = 0`` (gimbal lock): the solve terminates when
-    ``|sin θ| < min_sin_theta`` and :func:`jrigid.simulate` reports it (error, or
-    ``Result.gimbal_lock`` with ``throw=False``). Use a quaternion formulation there.
+    Singular at ``sin θ = 0`` (gimbal lock): the solve terminates at the end of the first
+    step in which ``|sin θ| < min_sin_theta`` (or ``sin θ`` changes sign) and
+    :func:`jrigid.simulate` reports it (error, or ``Result.gimbal_lock`` with
+    ``throw=False``). The event has no root finder, so ``t_stop`` is that step's end,
+    up to a step past the crossing (measured: 0.185 for a crossing at 0.05); the outputs
+    before ``t_stop`` are as accurate as elsewhere. Use a quaternion formulation there.
 
     Attributes:
         min_sin_theta: static threshold on ``|sin θ|``; default ``1e-3``.

@@ -475,3 +475,16 @@ def test_a_body_still_sliding_when_contacts_pile_up_is_held_still_with_a_warning
         warnings.simplefilter("error", contact.RestingWarning)
         assert contact.simulate_bounces(scene, still, jnp.linspace(0.0, 3.0, 31)).status == \
             "resting"
+
+
+def test_tracing_simulate_bounces_is_refused_with_the_remedy():
+    """jax.grad through it ended in a ConcretizationTypeError from inside."""
+    scene = ball_scene(0.5, 0.5, 9.81)
+
+    def height(z):
+        state = initial.from_omega(None, (0.0, 0.0, 0.0), x=jnp.stack([0.0, 0.0, z]),
+                                   v=(0.0, 0.0, 0.0))
+        return contact.simulate_bounces(scene, state, jnp.linspace(0.0, 1.0, 3)).trajectory.x[-1, 2]
+
+    with pytest.raises(TypeError, match="cannot be traced.*jrigid.impacts"):
+        jax.grad(height)(2.0)
