@@ -90,10 +90,21 @@ def _k(m1):
     return _rf_sqrt(zero, _safe_sqrt(m1), jnp.ones_like(m1))
 
 
-def _e(m, m1):
+@jax.custom_jvp
+def _e(m1):
     # E = m1 (R_D(0, m1, 1) + R_D(0, 1, m1)) / 3 (DLMF 19.25.1): no cancellation as m -> 1.
     zero, one, sm1 = jnp.zeros_like(m1), jnp.ones_like(m1), _safe_sqrt(m1)
     return m1 * (_rd_sqrt(zero, sm1, one) + _rd_sqrt(zero, one, sm1)) / 3.0
+
+
+@_e.defjvp
+def _e_jvp(primals, tangents):
+    # dE/dm1 = (K − E) / (2m) = R_D(0, m1, 1) / 6 (DLMF 19.25.1, 19.4.2), free of the
+    # cancellation that differentiating the sum above suffers as m1 → 0 (relative error
+    # 5e-5 at m1 = 1e-12, 1e14 at 1e-30)
+    (m1,), (dm1,) = primals, tangents
+    zero, one = jnp.zeros_like(m1), jnp.ones_like(m1)
+    return _e(m1), dm1 * _rd_sqrt(zero, _safe_sqrt(m1), one) / 6.0
 
 
 def _pi(n, m, m1):
@@ -128,7 +139,9 @@ def ellipe(m=None, *, m1=None) -> jax.Array:
         ``(...)`` array, equal to ``scipy.special.ellipe``.
     """
     m, m1, _ = _params(m, m1)
-    return jnp.where(~(m1 >= 0), jnp.nan, jnp.where(m1 == 0, 1.0, _e(m, m1)))
+    inside = m1 > 0  # (m = 1: E = 1, where the derivative is infinite)
+    return jnp.where(~(m1 >= 0), jnp.nan,
+                     jnp.where(inside, _e(jnp.where(inside, m1, 1.0)), 1.0))
 
 
 @jax.jit
