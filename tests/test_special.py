@@ -383,3 +383,20 @@ def test_the_derivative_of_e_stays_accurate_as_m_tends_to_one():
     got = float(jax.grad(lambda y: sp.ellipeinc(4.0, m1=y))(1e-30))
     assert got == pytest.approx(e_part, rel=1e-10)
     assert float(jax.grad(sp.ellipe)(0.0)) == pytest.approx(-np.pi / 8, rel=1e-14)
+
+
+def test_third_kind_integrals_for_large_negative_characteristics_and_extreme_scales():
+    """Π(n|m) at n = −1e12 was 0.876 instead of 1.57e-6 (too few duplication steps); R_J
+    of arguments of order 1e±110 was NaN (a product overflowed). Beyond 1 − n = 1e16,
+    where K and n R_J / 3 cancel to worse than 1e-8, Π is NaN."""
+    with mp.workdps(30):
+        for n in (-1e8, -1e12, -1e16):
+            assert float(sp.ellippi(n, 0.5)) == pytest.approx(float(mp.ellippi(n, 0.5)),
+                                                               rel=1e-7)
+            assert float(sp.ellippiinc(n, 1.2, 0.5)) == pytest.approx(
+                float(mp.ellippi(n, 1.2, 0.5)), rel=1e-7)
+        for scale in (1e110, 1e-110, 1e200):
+            args = [scale, 2 * scale, 3 * scale, 4 * scale]
+            want = float(mp.elliprj(*[mp.mpf(a) for a in args]))
+            assert float(sp.elliprj(*args)) == pytest.approx(want, rel=1e-14)
+    assert np.isnan(float(sp.ellippi(-1e17, 0.5)))

@@ -221,12 +221,21 @@ def elliprj(x, y, z, p) -> jax.Array:
             principal value for ``p < 0`` is not implemented: NaN).
 
     Returns:
-        ``(...)`` array; matches ``scipy.special.elliprj`` for ``p > 0``.
+        ``(...)`` array; matches ``scipy.special.elliprj`` for ``p > 0``. The arguments are
+        first scaled by a power of two near the largest (``R_J`` is homogeneous of degree
+        −3/2), so that no product inside overflows: without it, arguments of order 1e110
+        or 1e-110 gave NaN.
     """
     x, y, z, p = as_floats(x, y, z, p, broadcast=True)
     bad = ~(x >= 0) | ~(y >= 0) | ~(z >= 0) | ~(p > 0)  # (NaN too)
+    largest = jnp.maximum(jnp.maximum(x, y), jnp.maximum(z, p))
+    usable = ~bad & jnp.isfinite(largest)
+    _, e = jnp.frexp(jnp.where(usable, largest, 1.0))
+    e = lax.stop_gradient(2 * (e // 2))  # even: the scale's square root is exact
+    x, y, z, p = (jnp.ldexp(a, -e) for a in (x, y, z, p))
     sp = _safe_sqrt(jnp.where(bad, 1.0, p))
     out = _rj_sqrt(_safe_sqrt(x), _safe_sqrt(y), _safe_sqrt(z), sp, _STEPS_RJ_WIDE)
+    out = jnp.ldexp(out, -3 * e // 2)
     return jnp.where(bad, jnp.nan, jnp.where(_two_zeros(x, y, z), jnp.inf, out))
 
 

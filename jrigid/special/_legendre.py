@@ -107,10 +107,18 @@ def _e_jvp(primals, tangents):
     return _e(m1), dm1 * _rd_sqrt(zero, _safe_sqrt(m1), one) / 6.0
 
 
+#: The largest ``p = 1 − n sin²φ`` the third-kind integrals accept: ``K`` and ``(n/3) R_J``
+#: cancel to ``Π ~ 1/√p``, a relative error of about ``eps √p`` (1e-8 at this bound; the
+#: duplication steps converge up to it). Beyond, NaN.
+MAX_THIRD_KIND_P = 1e16
+# duplication steps of R_J for the third-kind integrals: enough up to MAX_THIRD_KIND_P
+_STEPS_PI = 40
+
+
 def _pi(n, m, m1):
     zero, one, sm1 = jnp.zeros_like(m1), jnp.ones_like(m1), _safe_sqrt(m1)
     sp = _safe_sqrt(1.0 - n)
-    return _rf_sqrt(zero, sm1, one) + (n / 3.0) * _rj_sqrt(zero, sm1, one, sp)
+    return _rf_sqrt(zero, sm1, one) + (n / 3.0) * _rj_sqrt(zero, sm1, one, sp, _STEPS_PI)
 
 
 @jax.jit
@@ -151,14 +159,16 @@ def ellippi(n, m=None, *, m1=None) -> jax.Array:
     ``Π(n|m) = ∫_0^{π/2} dθ / ((1 - n sin²θ) √(1 - m sin²θ))`` (mpmath's ``ellippi(n, m)``).
 
     Args:
-        n: ``(...)`` characteristic, ``n < 1`` (``n > 1``, a principal value, gives NaN).
+        n: ``(...)`` characteristic, ``1 − 1e16 ≤ n < 1`` (``K`` and ``n R_J / 3`` cancel: the
+            relative error is about ``eps √(1 − n)``, 1e-11 at ``n = −1e10``); outside,
+            NaN (``n > 1`` is a principal value, not implemented).
         m: ``(...)`` parameter ``m < 1``, or m1: ``(...)`` complement ``1 - m`` (keyword).
 
     Returns:
         ``(...)`` array.
     """
     m, m1, (n,) = _params(m, m1, n)
-    bad = ~(m1 > 0) | ~(n < 1)  # (NaN too)
+    bad = ~(m1 > 0) | ~(n < 1) | ~(1.0 - n <= MAX_THIRD_KIND_P)  # (NaN too)
     return jnp.where(bad, jnp.nan, _pi(jnp.where(bad, 0.0, n), m, jnp.where(bad, 1.0, m1)))
 
 
@@ -215,8 +225,9 @@ def ellippiinc(n, phi, m=None, *, m1=None) -> jax.Array:
     ``Π(n; φ|m) = ∫_0^φ dθ / ((1 - n sin²θ) √(1 - m sin²θ))``.
 
     Args:
-        n: ``(...)`` characteristic with ``n sin²φ < 1`` (and ``n < 1`` once ``|φ| > π/2``);
-            otherwise NaN (principal values are not implemented).
+        n: ``(...)`` characteristic with ``n sin²φ < 1`` (and ``n < 1`` once ``|φ| > π/2``)
+            and ``1 − n sin²φ ≤ 1e16`` (as :func:`ellippi`); otherwise NaN (principal
+            values are not implemented).
         phi: ``(...)`` amplitude, any real value.
         m: ``(...)`` parameter, or m1: ``(...)`` complement ``1 - m`` (keyword).
 
@@ -227,10 +238,10 @@ def ellippiinc(n, phi, m=None, *, m1=None) -> jax.Array:
     j, s, c = _reduce_amplitude(phi)
     d2 = m1 + m * c * c
     p = 1.0 - n * s * s
-    bad = ~(d2 >= 0) | ~(p > 0) | ((j != 0) & ~(n < 1))  # (NaN too)
+    bad = ~(d2 >= 0) | ~(p > 0) | ~(p <= MAX_THIRD_KIND_P) | ((j != 0) & ~(n < 1))
     one, sd = jnp.ones_like(s), _safe_sqrt(d2)
     sp = _safe_sqrt(jnp.where(bad, 1.0, p))
-    out = s * _rf_sqrt(c, sd, one) + (n / 3.0) * s**3 * _rj_sqrt(c, sd, one, sp)
+    out = s * _rf_sqrt(c, sd, one) + (n / 3.0) * s**3 * _rj_sqrt(c, sd, one, sp, _STEPS_PI)
     full = jnp.where((j != 0) & ~bad, ellippi(jnp.where(bad, 0.0, n), m, m1=m1), 0.0)
     out = out + _times_j(j, full)
     return jnp.where(bad, jnp.nan, out)
