@@ -120,7 +120,7 @@ MAX_INTERVAL_STEPS = 2**31 - 1
 
 def check_interval_steps(count: float, dt) -> None:
     """``ValueError`` naming ``dt`` when ``count`` steps per output interval (a concrete
-    number) exceed :data:`MAX_INTERVAL_STEPS`."""
+    number) exceed ``MAX_INTERVAL_STEPS``."""
     if np.isfinite(count) and count > MAX_INTERVAL_STEPS:
         raise ValueError(f"dt={float(dt):g} needs {count:.3g} steps in an output interval, "
                          f"more than {MAX_INTERVAL_STEPS} (a step counter's range): raise dt")
