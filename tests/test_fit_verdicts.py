@@ -243,6 +243,20 @@ def test_noiseless_data_without_sigma_is_a_success():
     np.testing.assert_allclose(res.params["omega0"], truth["omega0"], atol=1e-9)
 
 
+def test_a_noiseless_spin_about_an_axis_without_sigma_fails_without_a_numpy_warning():
+    """χ² = 0 exactly (a steady spin, fitted from its own first sample) made the covariance
+    scale 0, and the Gauss–Newton step 0/0: a RuntimeWarning and a NaN step length."""
+    ts = jnp.linspace(0.0, 8.0, 41)
+    omega = jnp.broadcast_to(jnp.array([2.0, 0.0, 0.0]), (41, 3))  # about axis 1: steady
+    problem = fit.Problem(fit.Exact(_build), fit.Gyroscope(ts, omega))
+    start = {"shape": fit.moment_ratios_raw(jnp.array([1.0, 1.5, 2.0])), "omega0": omega[0]}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        warnings.simplefilter("ignore", fit.FitWarning)
+        res = fit.fit(problem, start, method="lm")
+    assert not res.success and res.chi2_dof == 0.0 and "rank-deficient" in res.message
+
+
 def test_a_parameter_seen_only_through_rounding_is_undetermined(example):
     """The overall scale of a torque-free body's moments changes no residual: its column
     of the Jacobian is rounding (1e-15 of the largest), which scaled to length 1 looked

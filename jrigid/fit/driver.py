@@ -463,14 +463,17 @@ def _judge(result: FitResult, problem, lm_state, *, max_iter, chi2_alpha, edge_t
         except ValueError:
             lap = None
         if lap is not None:
-            scale = 1.0
+            scale, unscaled = 1.0, lap
             if not sigma_given and lap.dof > 0:
                 scale = lap.chi2 / lap.dof
                 lap = Laplace.from_jacobian(
                     params, r, jac, rcond=rcond, scale_by_chi2=True, size=size
                 )
             g = np.asarray(jac).T @ np.asarray(r)
-            c0 = np.asarray(lap.cov_pinv) / scale
+            # (noiseless data fitted exactly: χ² = 0, so the scaled covariance is zero and
+            # cannot be unscaled; the unscaled one gives the same, zero, step)
+            c0 = np.asarray(lap.cov_pinv) / scale if scale > 0 else np.asarray(
+                unscaled.cov_pinv)
             step = c0 @ g  # the Gauss–Newton step (up to its sign)
             step_length = float(np.sqrt(max(g @ step, 0.0) / scale)) if scale > 0 else 0.0
             relative = np.abs(step) / np.maximum(1.0, np.abs(np.asarray(lap.flat)))
