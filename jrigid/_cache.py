@@ -21,8 +21,11 @@ saves.
 - the directory cannot be created or written (then nothing is cached, silently).
 
 JAX only writes programs whose compilation took at least
-``jax_persistent_cache_min_compile_time_secs`` (1 s by default), so small programs,
-jrigid's or the user's, are not written; each of jrigid's solves is a few hundred kB.
+``jax_persistent_cache_min_compile_time_secs``. JAX's default, 1 s, left out a free
+rotor's solve, which XLA compiles in 0.9–1.0 s on 2 cores: jrigid lowers it to
+``MIN_COMPILE_SECONDS`` unless it was set to another value (the option or its
+environment variable ``JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS``). Each of jrigid's
+solves is a few hundred kB.
 The cache holds at most ``MAX_BYTES`` (JAX's ``jax_compilation_cache_max_size``, unless
 set): JAX then removes the least recently used programs, and reads and writes the
 directory under a file lock (``filelock``), so that processes sharing it (the workers
@@ -40,8 +43,8 @@ import os
 
 from jrigid._on_jax import after_jax_import
 
-__all__ = ["DEFAULT_DIR", "ENV", "MAX_BYTES", "OFF", "OPTION", "cache_dir", "clear", "configure",
-           "contents"]
+__all__ = ["DEFAULT_DIR", "ENV", "MAX_BYTES", "MIN_COMPILE_SECONDS", "OFF", "OPTION",
+           "cache_dir", "clear", "configure", "contents"]
 
 #: The environment variable that chooses the directory (or turns the cache off).
 ENV = "JRIGID_CACHE_DIR"
@@ -58,7 +61,12 @@ DEFAULT_DIR = os.path.join("jrigid", "xla")
 #: The cache's size limit (bytes), about a thousand of jrigid's compiled solves.
 MAX_BYTES = 1 << 30
 
+#: The shortest compilation (seconds) whose program is written to the cache.
+MIN_COMPILE_SECONDS = 0.25
+
 _MAX_OPTION = "jax_compilation_cache_max_size"
+_MIN_TIME_OPTION = "jax_persistent_cache_min_compile_time_secs"
+_JAX_MIN_TIME = 1.0  # JAX's default for _MIN_TIME_OPTION
 
 # How JAX names a cached program's file and its access-time file.
 _PROGRAM, _ACCESSED = "-cache", "-atime"
@@ -104,6 +112,8 @@ def _enable() -> None:
     # JAX's default is no limit and no lock; a limit needs filelock (a dependency)
     if getattr(jax.config, _MAX_OPTION, None) == -1 and importlib.util.find_spec("filelock"):
         jax.config.update(_MAX_OPTION, MAX_BYTES)
+    if getattr(jax.config, _MIN_TIME_OPTION, None) == _JAX_MIN_TIME:
+        jax.config.update(_MIN_TIME_OPTION, MIN_COMPILE_SECONDS)
 
 
 def configure() -> None:

@@ -32,16 +32,18 @@ if order != "jrigid_first":
 hits = []
 jax.monitoring.register_event_listener(
     lambda event, **kw: hits.append(event) if event.endswith("cache_hits") else None)
+min_time = jax.config.jax_persistent_cache_min_compile_time_secs
 jax.config.update("jax_persistent_cache_min_compile_time_secs", 0)
 jax.jit(lambda x: jnp.sin(x) * jnp.cos(x) + 1.5)(jnp.arange(7.0)).block_until_ready()
 print(json.dumps({"dir": jax.config.jax_compilation_cache_dir, "hits": len(hits),
-                  "max": jax.config.jax_compilation_cache_max_size}))
+                  "max": jax.config.jax_compilation_cache_max_size, "min_time": min_time}))
 """
 
 
 def _run(env_updates: dict[str, str | None], order: str = "jrigid_first") -> dict:
     env = dict(os.environ)
-    for key in (_cache.ENV, "JAX_COMPILATION_CACHE_DIR"):
+    for key in (_cache.ENV, "JAX_COMPILATION_CACHE_DIR",
+                "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"):
         env.pop(key, None)
     for key, value in env_updates.items():
         if value is not None:
@@ -56,11 +58,18 @@ def _run(env_updates: dict[str, str | None], order: str = "jrigid_first") -> dic
 def test_a_second_process_loads_what_the_first_compiled(tmp_path, order):
     cache = str(tmp_path / "cache")
     first = _run({_cache.ENV: cache}, order)
-    assert first == {"dir": cache, "hits": 0, "max": _cache.MAX_BYTES}
+    assert first == {"dir": cache, "hits": 0, "max": _cache.MAX_BYTES,
+                     "min_time": _cache.MIN_COMPILE_SECONDS}
     assert any(name.endswith("-cache") for name in os.listdir(cache)), os.listdir(cache)
     assert (os.stat(cache).st_mode & 0o077) == 0  # the owner's only
     second = _run({_cache.ENV: cache}, order)
     assert second["dir"] == cache and second["hits"] >= 1
+
+
+def test_a_shortest_compile_time_the_user_chose_is_kept(tmp_path):
+    run = _run({_cache.ENV: str(tmp_path / "cache"),
+                "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "2.5"})
+    assert run["min_time"] == 2.5 and run["dir"] == str(tmp_path / "cache")
 
 
 def test_the_default_directory_is_below_the_users_cache(tmp_path):
@@ -72,7 +81,7 @@ def test_the_default_directory_is_below_the_users_cache(tmp_path):
 def test_a_directory_the_user_chose_for_jax_is_kept(tmp_path):
     theirs = str(tmp_path / "theirs")
     run = _run({"JAX_COMPILATION_CACHE_DIR": theirs, _cache.ENV: str(tmp_path / "ours")})
-    assert run["dir"] == theirs and run["max"] == -1  # JAX's defaults, untouched
+    assert run["dir"] == theirs and run["max"] == -1 and run["min_time"] == 1.0  # JAX's own
     assert not (tmp_path / "ours").exists()
 
 
