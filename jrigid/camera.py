@@ -20,7 +20,7 @@ import jax.numpy as jnp
 
 from jrigid._checks import as_float, check_shape, fail_if
 from jrigid.affine import apply_to_points, from_blocks
-from jrigid.linalg import safe_norm
+from jrigid.linalg import rescale, safe_norm
 
 __all__ = ["look_at", "orthographic", "perspective"]
 
@@ -61,7 +61,8 @@ def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> jax.Array:
     columns of ``R`` the camera axes in world coordinates (17.9).
 
     Args:
-        eye, target: ``(..., 3)`` finite; must differ.
+        eye, target: ``(..., 3)`` finite; must differ (by any amount: the direction of
+            their difference is computed without overflow or underflow).
         up: ``(..., 3)`` finite approximate up direction, not parallel to ``target - eye``.
 
     Returns:
@@ -78,20 +79,23 @@ def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> jax.Array:
         "look_at: eye, target and up must be finite",
         lambda: f"eye {eye}, target {target}, up {up}",
     )
-    forward = target - eye
+    # eye and target scaled by one power of two (exactly), so that neither their
+    # difference nor its norm overflows or underflows: any two distinct points have a
+    # direction, 1e-20 apart or 1e308 from the origin
+    both = rescale(jnp.concatenate([eye, target], axis=-1))[0]
+    forward = both[..., 3:] - both[..., :3]
     dist = safe_norm(forward)
-    scale = jnp.maximum(jnp.max(jnp.abs(eye), axis=-1), jnp.max(jnp.abs(target), axis=-1))
-    tiny = jnp.finfo(forward.dtype).eps * jnp.maximum(scale, 1.0)
     forward = fail_if(
         forward,
-        ~(dist > tiny),
+        ~(dist > 0),
         "look_at: zero-length look direction (eye == target)",
         lambda: f"eye {eye}, target {target}",
     )
     f = forward / jnp.where(dist == 0, 1.0, dist)[..., None]
-    right = jnp.cross(f, up)
+    up_scaled = rescale(up)[0]
+    right = jnp.cross(f, up_scaled)
     rnorm = safe_norm(right)
-    unorm = safe_norm(up)
+    unorm = safe_norm(up_scaled)
     right = fail_if(
         right,
         ~(rnorm > 1e3 * jnp.finfo(right.dtype).eps * unorm),
@@ -147,6 +151,12 @@ def perspective(
         lambda: f"aspect {aspect}",
     )
     V = look_at(eye, target, up)
+    try:
+        jnp.broadcast_shapes(points.shape[:-1], V.shape[:-2])
+    except ValueError:
+        raise ValueError(
+            f"perspective: the batch shapes of points {points.shape[:-1]} and of the camera "
+            f"(eye, target, up) {V.shape[:-2]} do not broadcast") from None
     pc = apply_to_points(V, points)
     depth = -pc[..., 2]
     batch = jnp.broadcast_shapes(depth.shape, fov.shape, aspect.shape)

@@ -165,13 +165,21 @@ def _default_out(name: str) -> Path:
 
 def _unwritable(folder: Path) -> str | None:
     """``None`` if ``folder`` exists or can be created, and a file can be written in it;
-    else the reason, in one line."""
+    else the reason, in one line. Folders made to find out are removed again (the run
+    makes them, unless it refuses its parameters)."""
+    missing = [p for p in (folder, *folder.parents) if not p.exists()]
     try:
         folder.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryFile(dir=folder):
             pass
     except OSError as e:
         return f"cannot write results to {str(folder)!r}: {e.strerror or e}"
+    finally:
+        for made in missing:  # deepest first
+            try:
+                made.rmdir()
+            except OSError:
+                break
     return None
 
 
@@ -181,7 +189,10 @@ def _run_one(name: str, out: Path | None, quick: bool, params: dict[str, str]) -
     print(f"== {name}{' (quick)' if quick else ''} -> {out}/", flush=True)
     registry.run(name, out, quick=quick, params=params)
     report = out / "report.md"
-    print(f"report: {report}", flush=True)
+    if report.is_file():
+        print(f"report: {report}", flush=True)
+    else:  # a main that returned no numbers and wrote no summary
+        print(f"no report.md: the experiment wrote no summary in {out}/", flush=True)
     return report
 
 
@@ -253,10 +264,8 @@ def _cmd_run(p_run: argparse.ArgumentParser, args: argparse.Namespace, name: str
         _fail(p_run, problem)
     try:
         _run_one(name, args.out, args.quick, raw)
-    except ValueError as e:  # a value the parser accepts but the experiment's physics not
-        if not raw:
-            raise
-        given = ", ".join(f"{k}={v}" for k, v in raw.items())
+    except registry.ParameterError as e:  # a value the parser accepts, the experiment not
+        given = ", ".join(f"{k}={v}" for k, v in raw.items()) or "the defaults"
         _fail(p_run, f"experiment {name!r} refused its parameters ({given}): {e}")
     return 0
 
@@ -306,6 +315,13 @@ def _cmd_cache(action: str) -> int:
     if path is None:
         print(f"the compilation cache is off ({_cache.ENV}={os.environ.get(_cache.ENV, '')!r})")
         return 0
+    if os.path.exists(path) and not os.path.isdir(path):
+        print(f"{path} is not a directory: nothing is cached (set {_cache.ENV} to a "
+              f"directory, or to 'off')")
+        return 1
+    if os.path.isdir(path) and not os.access(path, os.W_OK | os.X_OK):
+        print(f"{path} cannot be written: nothing new is cached (set {_cache.ENV} to "
+              f"another directory)")
     if action == "clear":
         removed = _cache.clear(path)
         print(f"{path}: removed {removed} compiled program{'' if removed == 1 else 's'}")

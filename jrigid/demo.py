@@ -43,7 +43,7 @@ import numpy as np
 from jrigid import inertia, initial, viz
 from jrigid import quaternion as quat
 from jrigid.body import RigidBody
-from jrigid.experiment_parameters import POSITIVE
+from jrigid.experiment_parameters import POSITIVE, ParameterError
 from jrigid.inertia import t_handle_moments
 from jrigid.integrate import simulate
 from jrigid.report import Report, format_number
@@ -51,6 +51,8 @@ from jrigid.scene import Scene
 from jrigid.theory import flip_theory, plate_theory, wobble_to_spin, zero_crossings
 
 __all__ = [
+    "MOMENT_RANGE",
+    "TOLERANCE",
     "flip_theory",
     "main",
     "plate_moments",
@@ -66,6 +68,14 @@ __all__ = [
 # --------------------------------------------------------------------------- bodies
 
 
+#: The relative tolerance of the demo's solves in float64 and in float32 (with JAX's
+#: 64-bit mode off; float32 cannot step to 1e-10).
+TOLERANCE = (1e-10, 1e-5)
+
+#: The plate's moments of inertia :func:`run_plate` accepts (its numbers square them).
+MOMENT_RANGE = (1e-50, 1e50)
+
+
 def plate_moments(mass: float, radius: float, thickness: float) -> np.ndarray:
     """Principal moments ``(I1, I1, I3)`` of the plate (:func:`jrigid.inertia.disk`)."""
     return np.asarray(inertia.disk(mass, radius, thickness), dtype=float)
@@ -76,7 +86,9 @@ def plate_moments(mass: float, radius: float, thickness: float) -> np.ndarray:
 
 def _align(v) -> jax.Array:
     """Quaternion turning the direction of ``v`` (body) onto space ``z`` (L drawn upright)."""
-    v = np.asarray(v, float) / np.linalg.norm(v)
+    v = np.asarray(v, float)
+    v = v / np.max(np.abs(v))  # (no overflow or underflow in the norm)
+    v = v / np.linalg.norm(v)
     axis = np.cross(v, [0.0, 0.0, 1.0])
     s = np.linalg.norm(axis)
     if s < 1e-12:
@@ -89,7 +101,8 @@ def _simulate(moments, omega0, t_end, n_samples):
     L_body = np.asarray(moments) * np.asarray(omega0)
     state = initial.from_omega(_align(L_body), jnp.asarray(omega0))
     ts = jnp.linspace(0.0, t_end, n_samples)
-    return simulate(scene, state, ts, rtol=1e-10, atol=1e-12)
+    rtol = TOLERANCE[ts.dtype == jnp.float32]  # float64, or JAX's float32 (x64 off)
+    return simulate(scene, state, ts, rtol=rtol, atol=1e-2 * rtol)
 
 
 @jax.jit
@@ -150,12 +163,20 @@ def run_plate(radius, thickness, tilt_deg, spin_hz, n_samples, wobbles) -> dict:
         (:func:`plate_theory`), ``measured`` (:func:`wobble_to_spin`) and table ``rows``.
     """
     moments = plate_moments(1.0, radius, thickness)
+    if not (MOMENT_RANGE[0] <= moments.min() and moments.max() <= MOMENT_RANGE[1]):
+        raise ParameterError(
+            f"radius={radius:g}, thickness={thickness:g} give the plate (mass 1) moments of "
+            f"inertia {moments.min():.3g}…{moments.max():.3g}, outside "
+            f"{MOMENT_RANGE[0]:g}…{MOMENT_RANGE[1]:g}")
     w3 = 2 * math.pi * spin_hz
     # tilt θ between the symmetry axis and L: tan θ = I1 ω⊥ / (I3 ω3)
     w_perp = w3 * math.tan(math.radians(tilt_deg)) * moments[2] / moments[0]
     omega0 = np.array([w_perp, 0.0, w3])
     theory = _floats(plate_theory(moments, omega0))
-    period = 2 * math.pi / theory["precession_rate"]
+    period = 2 * math.pi / theory["precession_rate"] if theory["precession_rate"] else math.inf
+    if not 0 < period < math.inf:
+        raise ParameterError(f"spin_hz={spin_hz:g} with this plate gives no finite wobble "
+                             f"period (precession rate {theory['precession_rate']:g} rad/s)")
     traj = _simulate(moments, omega0, wobbles * period, n_samples)
     measured = _floats(wobble_to_spin(traj.ts, traj.q, traj.L_space, axis=2))
     rows = [
@@ -290,15 +311,17 @@ def main(
         the figures and animations are drawn).
 
     Raises:
-        ValueError: a tilt outside ``(0, 90)`` degrees, fewer than 2 frames or a
-            non-positive ``fps`` (before anything runs).
+        ParameterError: (a ``ValueError``) a tilt outside ``(0, 90)`` degrees, fewer than 2
+            frames or a non-positive ``fps``, a plate whose moments are outside
+            ``MOMENT_RANGE``, or one with no finite wobble period (before anything is
+            written).
     """
     for name, value in (("tilt_deg", tilt_deg), ("handle_tilt_deg", handle_tilt_deg)):
         if not 0 < value < 90:
-            raise ValueError(f"{name} must be in (0, 90) degrees, got {value:g}")
+            raise ParameterError(f"{name} must be in (0, 90) degrees, got {value:g}")
     if frames < 2 or fps <= 0:
-        raise ValueError(f"an animation needs frames >= 2 and fps > 0, got frames={frames}, "
-                         f"fps={fps}")
+        raise ParameterError(f"an animation needs frames >= 2 and fps > 0, got "
+                             f"frames={frames}, fps={fps}")
     start = time.perf_counter()
     n_samples = 401 if quick else 1201  # both runs alike: one compilation
     frames = min(frames, 24) if quick else frames

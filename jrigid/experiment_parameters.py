@@ -35,7 +35,15 @@ __all__ = [
 
 
 class ParameterError(ValueError):
-    """A parameter given on the command line that the experiment does not accept."""
+    """A parameter the experiment does not accept: unknown, not convertible, or a value
+    outside its range.
+
+    Raised by :func:`parse_params`, and by an experiment's ``main`` for a value it
+    refuses before it runs (a ``ValueError``, so Python callers catch it as one).
+    ``jrigid run`` reports it as a usage error (exit code 2), and leaves the results
+    folder of an earlier run as it was; any other exception is the experiment's failure
+    (a traceback, exit code 1).
+    """
 
 
 class _Positive:
@@ -49,7 +57,7 @@ POSITIVE = _Positive()
 """Annotation marker of a parameter that must be ``> 0``: ``Annotated[float, POSITIVE]``."""
 
 
-_RESERVED = ("out_dir", "quick")
+_RESERVED = {"out_dir": "--out", "quick": "--quick"}  # name -> the command-line option
 _TRUE = {"1", "true", "yes", "on", "y", "t"}
 _FALSE = {"0", "false", "no", "off", "n", "f"}
 
@@ -248,7 +256,7 @@ def parse_params(name: str, main: Callable[..., Any], raw: Mapping[str, Any]) ->
     for key, text in raw.items():
         if key in _RESERVED:
             raise ParameterError(
-                f"{key!r} is set with --{key.replace('_', '-')}, not as a parameter of {name}"
+                f"{key!r} is set with {_RESERVED[key]}, not as a parameter of {name}"
             )
         if key not in defaults and not open_ended:
             raise ParameterError(

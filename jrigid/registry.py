@@ -263,10 +263,22 @@ def run(
     Also writes ``run.json`` into ``out_dir``: name, parameters, quick, and ``status``,
     ``"running"`` from the start (a folder whose run was interrupted says so), then
     ``"finished"`` with the wall time, or ``"failed"`` with the error.
+
+    An experiment refuses its parameters by raising ``ParameterError``, or any
+    ``ValueError`` before it has written a file (its checks of the values, the library's
+    included), when ``params`` were given. Then the folder is left as it was (an earlier
+    run's ``run.json`` is put back) and the error is raised as a ``ParameterError``
+    (a ``ValueError``). A ``ValueError`` after the experiment wrote its first file is a
+    failure of the run, as any other exception.
+
+    Raises:
+        ExperimentError: no experiment ``name``.
+        ParameterError: a parameter ``main`` does not take or refuses.
     """
     exp = get(name)
     typed = parse_params(name, exp.main, params or {})
     out = Path(out_dir) if out_dir is not None else Path("results") / name
+    created = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
     sig = inspect.signature(exp.main).parameters
     takes_quick = "quick" in sig or any(p.kind is p.VAR_KEYWORD for p in sig.values())
@@ -282,14 +294,51 @@ def run(
     def record(**status):
         (out / "run.json").write_text(json.dumps({**meta, **status}, indent=2) + "\n")
 
+    previous = (out / "run.json").read_bytes() if (out / "run.json").is_file() else None
+    before = _outputs(out)
     record(status="running")
     start = time.perf_counter()
     try:
         result = exp.main(out, **kwargs, **typed)
+        seconds = time.perf_counter() - start
+        _fallback_outputs(out, name, result)
+    except ValueError as e:
+        # refused before it ran (nothing written): the folder stays as it was
+        if isinstance(e, ParameterError) or (typed and _outputs(out) == before):
+            _restore(out, previous, created)
+            if isinstance(e, ParameterError):
+                raise
+            raise ParameterError(str(e)) from e
+        record(status="failed", error=f"{type(e).__name__}: {e}")
+        raise
     except BaseException as e:  # Ctrl-C included: the folder must not look finished
         record(status="failed", error=f"{type(e).__name__}: {e}")
         raise
-    seconds = time.perf_counter() - start
-    _fallback_outputs(out, name, result)
     record(status="finished", seconds=round(seconds, 3))
     return result
+
+
+def _outputs(out: Path) -> dict[str, int]:
+    """The files below ``out`` (``run.json`` aside) with their modification times (ns)."""
+    found = {}
+    for path in out.rglob("*"):
+        try:
+            if path.name != "run.json" and path.is_file():
+                found[str(path)] = path.stat().st_mtime_ns
+        except OSError:  # removed meanwhile
+            pass
+    return found
+
+
+def _restore(out: Path, previous: bytes | None, created: bool) -> None:
+    """Put back ``out``'s earlier ``run.json`` (or remove the new one, and ``out`` itself
+    if this run created it and nothing else is in it)."""
+    if previous is not None:
+        (out / "run.json").write_bytes(previous)
+        return
+    (out / "run.json").unlink(missing_ok=True)
+    if created:
+        try:
+            out.rmdir()
+        except OSError:  # the experiment wrote something
+            pass

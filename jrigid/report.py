@@ -29,8 +29,14 @@ import os
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
+from urllib.parse import quote
 
-__all__ = ["Report", "to_jsonable", "format_number"]
+__all__ = ["IMAGE_SUFFIXES", "Report", "to_jsonable", "format_number"]
+
+#: File name endings :meth:`Report.figure` keeps (matplotlib's formats); any other name
+#: gets ``.png`` added (so ``"tilt_0.5deg"`` is ``tilt_0.5deg.png``).
+IMAGE_SUFFIXES = frozenset({".png", ".svg", ".pdf", ".jpg", ".jpeg", ".eps", ".ps", ".tif",
+                            ".tiff", ".webp"})
 
 
 def to_jsonable(x: Any) -> Any:
@@ -45,7 +51,11 @@ def to_jsonable(x: Any) -> Any:
     if isinstance(x, os.PathLike):
         return os.fspath(x)
     if isinstance(x, Mapping):
-        return {str(k): to_jsonable(v) for k, v in x.items()}
+        out = {str(k): to_jsonable(v) for k, v in x.items()}
+        if len(out) < len(x):
+            raise TypeError(f"keys that are the same as text cannot be stored in numbers.json: "
+                            f"{sorted(map(repr, x))}")
+        return out
     if isinstance(x, list | tuple):
         return [to_jsonable(v) for v in x]
     if hasattr(x, "__array__") or hasattr(x, "tolist"):
@@ -66,11 +76,18 @@ def to_jsonable(x: Any) -> Any:
 
 
 def format_number(x: Any, digits: int = 6) -> str:
-    """Short text for a table cell: floats with ``digits`` significant digits."""
+    """Short text for a table cell: floats with ``digits`` significant digits; integers
+    in full and booleans as ``True``/``False`` (Python's, numpy's or JAX's scalars)."""
     if isinstance(x, bool) or x is None:
         return str(x)
     if isinstance(x, numbers.Integral):
         return str(int(x))
+    kind = getattr(getattr(x, "dtype", None), "kind", None)
+    if kind is not None and getattr(x, "ndim", None) == 0:  # a numpy or JAX scalar
+        if kind == "b":
+            return str(bool(x))
+        if kind in "iu":
+            return str(int(x))
     if isinstance(x, numbers.Real) or hasattr(x, "__float__"):
         try:
             return f"{float(x):.{digits}g}"
@@ -111,7 +128,9 @@ class Report:
         The image is shown at this point of the summary (after the blocks added so far).
 
         Args:
-            name: file stem, e.g. ``"omega"``; an explicit ``.png``/``.svg``/``.pdf`` is kept.
+            name: file stem, e.g. ``"omega"`` or ``"tilt_0.5deg"`` (``.png`` is added);
+                a name ending in one of ``IMAGE_SUFFIXES`` (``".svg"``, ``".pdf"``, ...)
+                keeps it. A file name, not a path.
             fig: anything with ``savefig(path, dpi=...)``.
             caption: text under the image in the summary.
             dpi: resolution, raised where needed so that a raster image is at least
@@ -123,7 +142,11 @@ class Report:
         """
         from jrigid.viz import save  # matplotlib is loaded already: fig is a figure
 
-        path = save(fig, self.out_dir / (name if Path(name).suffix else f"{name}.png"), dpi)
+        if not name or name in (".", "..") or Path(name).name != name:
+            raise ValueError(f"Report.figure: name must be a file name, got {name!r}")
+        suffix = Path(name).suffix.lower()
+        path = save(fig, self.out_dir / (name if suffix in IMAGE_SUFFIXES else f"{name}.png"),
+                    dpi)
         if show:
             self.image(path, caption)
         return path
@@ -135,7 +158,8 @@ class Report:
             rel = path.resolve().relative_to(self.out_dir.resolve()).as_posix()
         except ValueError:
             rel = path.as_posix()
-        self._blocks.append(f"![{Path(rel).stem}]({rel})" + (f"\n\n*{caption}*" if caption else ""))
+        link = quote(rel, safe="/")  # a space would end the link in CommonMark
+        self._blocks.append(f"![{Path(rel).stem}]({link})" + (f"\n\n*{caption}*" if caption else ""))
 
     # ----------------------------------------------------------------- numbers
     def numbers(self, values: Mapping[str, Any] | None = None, **more: Any) -> Path:
@@ -144,10 +168,10 @@ class Report:
         Returns:
             the path of ``numbers.json``.
         """
-        for key, val in {**(values or {}), **more}.items():
-            self._numbers[str(key)] = to_jsonable(val)
+        merged = {**self._numbers, **to_jsonable({**(values or {}), **more})}
         path = self.out_dir / "numbers.json"
-        path.write_text(json.dumps(self._numbers, indent=2, allow_nan=False) + "\n")
+        _write_text(path, json.dumps(merged, indent=2, allow_nan=False) + "\n")
+        self._numbers = merged  # (only once all of them could be stored)
         return path
 
     # ----------------------------------------------------------------- text
@@ -161,6 +185,12 @@ class Report:
         Returns:
             the table's markdown.
         """
+        headers = list(headers)
+        rows = [list(row) for row in rows]
+        for i, row in enumerate(rows):
+            if len(row) != len(headers):
+                raise ValueError(f"Report.table: row {i} has {len(row)} cells for "
+                                 f"{len(headers)} headers: {row!r}")
         head = (str(h).replace("|", "\\|") for h in headers)
         lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(headers)]
         for row in rows:
@@ -183,5 +213,16 @@ class Report:
             parts.append(text.strip())
         parts.extend(self._blocks)
         path = self.out_dir / self.summary_name
-        path.write_text("\n\n".join(parts) + "\n")
+        _write_text(path, "\n\n".join(parts) + "\n")
         return path
+
+
+def _write_text(path: Path, text: str) -> None:
+    """Write ``text`` to a temporary file next to ``path``, then rename it onto ``path``:
+    an interrupted run leaves the previous file or the new one, never half of it."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        tmp.write_text(text)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)

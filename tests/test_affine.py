@@ -663,3 +663,28 @@ def test_to_homogeneous_names_a_w_of_the_wrong_shape():
         affine.to_homogeneous(jnp.ones(3), jnp.ones(2))
     np.testing.assert_array_equal(affine.to_homogeneous(jnp.ones((2, 3)), jnp.zeros(2)),
                                   [[1, 1, 1, 0], [1, 1, 1, 0]])
+
+
+@pytest.mark.parametrize("eye, target", [
+    ([5e-8, 0.0, 0.0], [0.0, 0.0, 0.0]),  # close, and near the origin
+    ([1e-20, 0.0, 0.0], [0.0, 0.0, 0.0]),
+    ([1e308, 0.0, 0.0], [0.0, 0.0, 0.0]),  # far: |eye|² overflows
+    ([1e308, 0.0, 0.0], [-1e308, 0.0, 0.0]),  # target - eye overflows
+    ([1.0, 2.0, 3.0], [1.0 + 1e-12, 2.0, 3.0]),
+])
+def test_look_at_any_two_distinct_points(eye, target):
+    """Cameras 5e-8 (float32) or 1e-20 (float64) from their target were refused as
+    "eye == target", and one at 1e308 as "`up` is parallel to the look direction"."""
+    V = np.asarray(affine.look_at(jnp.asarray(eye), jnp.asarray(target)))
+    d = np.asarray(target) / 2 - np.asarray(eye) / 2  # (no overflow)
+    f = d / np.max(np.abs(d))
+    assert np.allclose(V[2, :3], -f / np.linalg.norm(f), atol=1e-15)  # looks along -z
+    R = V[:3, :3]
+    assert np.allclose(R @ R.T, np.eye(3), atol=1e-15) and np.linalg.det(R) > 0
+
+
+def test_look_at_refuses_equal_points_and_perspective_names_unmatched_batches():
+    with pytest.raises(ValueError, match="eye == target"):
+        affine.look_at(jnp.ones(3), jnp.ones(3))
+    with pytest.raises(ValueError, match=r"batch shapes of points \(5,\) and of the camera"):
+        affine.perspective(jnp.zeros((5, 3)), jnp.ones((2, 3)), jnp.zeros(3), 1.0)

@@ -45,6 +45,28 @@ def exp_dir(tmp_path, monkeypatch):
     )
     (folder / "broken.py").write_text('"""Fails."""\ndef main(out_dir, quick=False):\n    1 / 0\n')
     monkeypatch.setenv(registry.ENV_VAR, str(folder))
+    (folder / "checked.py").write_text(
+        '"""Checked: refuses a negative level, fails at level 5 after writing."""\n'
+        "from jrigid.registry import ParameterError\n"
+        "def main(out_dir, quick=False, *, level=1):\n"
+        "    if level < 0:\n"
+        "        raise ParameterError(f'level must be >= 0, got {level}')\n"
+        "    (out_dir / 'numbers.json').write_text('{}')\n"
+        "    (out_dir / 'report.md').write_text('# checked')\n"
+        "    if level == 5:\n"
+        "        raise ValueError('internal error unrelated to the parameters')\n"
+        "    return {'level': level}\n"
+    )
+    (folder / "unstorable.py").write_text(
+        '"""Unstorable: returns a set, which numbers.json cannot hold."""\n'
+        "def main(out_dir, quick=False):\n"
+        "    return {'a': 1, 's': {1, 2}}\n"
+    )
+    (folder / "silent.py").write_text(
+        '"""Silent: writes nothing and returns nothing."""\n'
+        "def main(out_dir, quick=False):\n"
+        "    return None\n"
+    )
     return folder
 
 
@@ -197,8 +219,72 @@ def test_values_the_demo_and_hello_refuse_are_refused_before_running(argv, messa
     a 100 % disagreement with theory, samples=0 in numpy's message."""
     code, err = _exit_code([*argv, "--out", str(tmp_path)], capsys)
     assert code == 2 and message in err and "Traceback" not in err
-    assert not (tmp_path / "numbers.json").exists()
-    assert json.loads((tmp_path / "run.json").read_text())["status"] == "failed"
+    assert list(tmp_path.iterdir()) == []  # the folder is left as it was
+
+
+def test_a_refused_parameter_leaves_an_earlier_run_as_it_was(exp_dir, capsys):
+    """A refused value used to rewrite run.json as "failed", beside the earlier run's
+    numbers and figures; without --out it left an empty results folder."""
+    out = exp_dir.parent / "out"
+    assert cli.main(["run", "checked", "--out", str(out)]) == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert json.loads(before["run.json"])["status"] == "finished"
+    code, err = _exit_code(["run", "checked", "level=-3", "--out", str(out)], capsys)
+    assert code == 2 and "refused its parameters (level=-3): level must be >= 0" in err
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    fresh = exp_dir.parent / "fresh"
+    code, err = _exit_code(["run", "checked", "level=-3", "--out", str(fresh)], capsys)
+    assert code == 2 and not fresh.exists()
+
+
+def test_a_value_error_after_the_first_output_is_a_failure_with_its_traceback(exp_dir,
+                                                                             capsys):
+    """Any ValueError used to be reported as a refused parameter (exit code 2, no
+    traceback) once a KEY=VALUE was given, a bug in the experiment included."""
+    out = exp_dir.parent / "out"
+    with pytest.raises(ValueError, match="internal"):
+        cli.main(["run", "checked", "level=5", "--out", str(out)])
+    assert json.loads((out / "run.json").read_text())["status"] == "failed"
+
+
+def test_a_result_that_cannot_be_stored_marks_the_run_failed(exp_dir):
+    """run.json said "running" for good when writing the returned numbers failed."""
+    out = exp_dir.parent / "out"
+    with pytest.raises(TypeError, match="cannot store a set"):
+        registry.run("unstorable", out)
+    assert json.loads((out / "run.json").read_text())["status"] == "failed"
+
+
+def test_reserved_names_point_to_their_options(capsys):
+    code, err = _exit_code(["run", "hello", "out_dir=x"], capsys)
+    assert code == 2 and "'out_dir' is set with --out," in err
+
+
+def test_a_run_without_a_summary_does_not_claim_one(exp_dir, capsys):
+    out = exp_dir.parent / "out"
+    assert cli.main(["run", "silent", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "no report.md" in printed and "report: " not in printed
+
+
+def test_cache_names_a_cache_path_that_is_a_file(capsys, monkeypatch, tmp_path):
+    monkeypatch.delenv("JAX_COMPILATION_CACHE_DIR", raising=False)
+    blocker = tmp_path / "file"
+    blocker.write_text("not a directory")
+    monkeypatch.setenv("JRIGID_CACHE_DIR", str(blocker))
+    assert cli.main(["cache"]) == 1
+    assert "is not a directory: nothing is cached" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("params, message", [
+    (["radius=1e-100"], "outside 1e-50"),
+    (["radius=1e100"], "outside 1e-50"),
+])
+def test_the_demo_refuses_plates_out_of_range(params, message, capsys, tmp_path):
+    """radius=1e-100 ended in a ZeroDivisionError, 1e100 in "ts must be strictly
+    increasing"."""
+    code, err = _exit_code(["demo", "--quick", *params, "--out", str(tmp_path)], capsys)
+    assert code == 2 and message in err and "Traceback" not in err
 
 
 def test_parameters_declared_positive_are_refused_unless_positive(tmp_path, monkeypatch):

@@ -50,3 +50,46 @@ def test_to_jsonable_and_format_number():
         to_jsonable(object())
     assert format_number(3.14159265, 3) == "3.14" and format_number(np.int32(7)) == "7"
     assert format_number(True) == "True" and format_number("x") == "x"
+
+
+def test_figure_names_with_dots_get_png_and_bad_names_are_refused(tmp_path):
+    """"tilt_0.5deg" was taken as a file of format "5deg" (matplotlib's ValueError); "" wrote
+    ".png.png" and linked ".png"."""
+    rep = Report(tmp_path)
+    fig = Figure()
+    fig.add_subplot().plot([0, 1], [0, 1])
+    assert rep.figure("tilt_0.5deg", fig).name == "tilt_0.5deg.png"
+    assert rep.figure("omega.svg", fig).name == "omega.svg"
+    assert rep.figure("my plot", fig).name == "my plot.png"
+    assert {p.name for p in tmp_path.iterdir()} == {"tilt_0.5deg.png", "omega.svg",
+                                                    "my plot.png"}
+    for bad in ("", "..", "sub/omega"):
+        with pytest.raises(ValueError, match="file name"):
+            rep.figure(bad, fig)
+    text = rep.write_summary().read_text()
+    assert "(my%20plot.png)" in text and "(tilt_0.5deg.png)" in text
+
+
+def test_numbers_that_cannot_be_stored_change_nothing(tmp_path):
+    rep = Report(tmp_path)
+    rep.numbers(a=1)
+    with pytest.raises(TypeError):
+        rep.numbers(b=2, c={1, 2})
+    rep.numbers(d=4)
+    assert json.loads((tmp_path / "numbers.json").read_text()) == {"a": 1, "d": 4}
+    with pytest.raises(TypeError, match="same as text"):
+        to_jsonable({1: "a", "1": "b"})
+
+
+def test_table_rows_must_match_the_headers(tmp_path):
+    rep = Report(tmp_path)
+    with pytest.raises(ValueError, match="row 1 has 3 cells for 2 headers"):
+        rep.table([(1, 2), (1, 2, 3)], headers=("a", "b"))
+
+
+def test_format_number_of_numpy_and_jax_scalars():
+    import jax.numpy as jnp
+
+    assert format_number(np.True_) == "True" and format_number(jnp.array(False)) == "False"
+    assert format_number(jnp.array(123456789)) == "123456789"
+    assert format_number(np.uint8(7)) == "7" and format_number(jnp.array(2.5)) == "2.5"
