@@ -174,8 +174,13 @@ def test_shared_values_are_traced_and_fingerprinted(tmp_path):
     assert info["compile_seconds"] == 0.0  # the second value reused the compiled program
     ensemble.run(scaled_rotor, inputs, shared={"scale": np.float64(2.0)}, chunk_size=4,
                  out_dir=tmp_path, progress=False)
-    with pytest.raises(ValueError, match="different run.*shared"):
+    with pytest.raises(ValueError, match="different run.*shared inputs' values"):
         ensemble.run(scaled_rotor, inputs, shared={"scale": np.float64(3.0)}, chunk_size=4,
+                     out_dir=tmp_path, progress=False)
+    # a shared input of another shape is named, with its shapes ("differs in: shared")
+    with pytest.raises(ValueError, match=r"shared inputs: \['scale'\] \(shape \[\] dtype <f8 "
+                                         r"→ shape \[3\]"):
+        ensemble.run(scaled_rotor, inputs, shared={"scale": np.full(3, 2.0)}, chunk_size=4,
                      out_dir=tmp_path, progress=False)
     with pytest.raises(ValueError, match=r"shared\['scale'\] has non-finite"):
         ensemble.run(scaled_rotor, inputs, shared={"scale": np.float64(np.inf)})

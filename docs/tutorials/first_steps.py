@@ -135,7 +135,7 @@ print("moments recovered:", back)
 # %%
 body = jrigid.RigidBody(moments)
 scene = jrigid.Scene(body, jrigid.FreeRotation())
-state = initial.from_omega(omega=jnp.array([0.4, 0.2, 2.0]))  # near the largest axis
+state = initial.from_omega(omega=jnp.array([0.4, 0.2, 2.0]))  # near axis 3, the smallest moment
 ts = jnp.linspace(0.0, 20.0, SAMPLES)
 traj = jrigid.simulate(scene, state, ts)
 print("steps:", int(traj.stats["num_steps"]), " result:", jrigid.Result(int(traj.result)).name)
@@ -154,7 +154,8 @@ fig
 # %% [markdown]
 # The same motion drawn: the box in the space frame, where `L` (orange) stays fixed and
 # the body axes wobble about it, and in the body frame, where `ω` and `L` trace
-# closed curves (polhodes) about the axis of largest moment.
+# closed curves (polhodes) about axis 3, the axis of smallest moment (as stable as the
+# largest: only the intermediate axis is not).
 
 # %%
 fig = viz.space_body_views(traj, viz.box(1.0, 2.0, 3.0), trail=SAMPLES // 4, figsize=(11, 5.5), dpi=110)

@@ -198,10 +198,33 @@ def read_meta(out_dir: pathlib.Path) -> dict[str, Any] | None:
 
 
 def mismatches(stored: dict[str, Any], wanted: dict[str, Any]) -> list[str]:
-    """Names of the fields a resumed run must reproduce that differ."""
-    return [
-        k for k in MATCHED if stored.get(k, _DEFAULTS.get(k)) != wanted.get(k, _DEFAULTS.get(k))
-    ]
+    """What a resumed run must reproduce and does not: one short text per difference,
+    naming the field (and, for the inputs, the leaf whose shape or dtype changed)."""
+    out = []
+    for k in MATCHED:
+        old, new = stored.get(k, _DEFAULTS.get(k)), wanted.get(k, _DEFAULTS.get(k))
+        if old == new:
+            continue
+        if k in ("inputs", "shared") and isinstance(old, dict) and isinstance(new, dict):
+            out.extend(_leaf_changes(k, old.get("leaves", {}), new.get("leaves", {})))
+        elif isinstance(old, int | str | bool) and isinstance(new, int | str | bool):
+            out.append(f"{k} ({old!r} → {new!r})")
+        else:
+            out.append(k)
+    return out
+
+
+def _leaf_changes(what: str, old: dict, new: dict) -> list[str]:
+    label = "the shared inputs" if what == "shared" else "the members' inputs"
+    changed = []
+    for name in sorted(set(old) | set(new)):
+        a, b = old.get(name), new.get(name)
+        if a is None or b is None:
+            changed.append(f"{label}: {name} {'added' if a is None else 'removed'}")
+        elif a != b:
+            changed.append(f"{label}: {name} (shape {a['shape']} dtype {a['dtype']} → shape "
+                           f"{b['shape']} dtype {b['dtype']})")
+    return changed or [f"{label}' values ({', '.join(sorted(new)) or 'structure'})"]
 
 
 def remove_stale_temporaries(out_dir: pathlib.Path) -> None:
