@@ -159,7 +159,8 @@ class Report:
         except ValueError:
             rel = path.as_posix()
         link = quote(rel, safe="/")  # a space would end the link in CommonMark
-        self._blocks.append(f"![{Path(rel).stem}]({link})" + (f"\n\n*{caption}*" if caption else ""))
+        text = f"![{Path(rel).stem}]({link})"
+        self._blocks.append(text + (f"\n\n*{caption}*" if caption else ""))
 
     # ----------------------------------------------------------------- numbers
     def numbers(self, values: Mapping[str, Any] | None = None, **more: Any) -> Path:
