@@ -304,7 +304,8 @@ def run(
         _fallback_outputs(out, name, result)
     except ValueError as e:
         # refused before it ran (nothing written): the folder stays as it was
-        if isinstance(e, ParameterError) or (typed and _outputs(out) == before):
+        if isinstance(e, ParameterError) or (typed and before is not None
+                                              and _outputs(out) == before):
             _restore(out, previous, created)
             if isinstance(e, ParameterError):
                 raise
@@ -318,10 +319,16 @@ def run(
     return result
 
 
-def _outputs(out: Path) -> dict[str, int]:
-    """The files below ``out`` (``run.json`` aside) with their modification times (ns)."""
+_MAX_SCANNED = 10_000  # entries of a results folder _outputs looks at, at most
+
+
+def _outputs(out: Path) -> dict[str, int] | None:
+    """The files below ``out`` (``run.json`` aside) with their modification times (ns);
+    ``None`` (not known) for a folder of more than ``_MAX_SCANNED`` entries."""
     found = {}
-    for path in out.rglob("*"):
+    for i, path in enumerate(out.rglob("*")):
+        if i >= _MAX_SCANNED:
+            return None
         try:
             if path.name != "run.json" and path.is_file():
                 found[str(path)] = path.stat().st_mtime_ns
