@@ -307,3 +307,21 @@ def test_from_matrix_refuses_a_tolerance_out_of_range(atol):
     with pytest.raises(ValueError, match="atol"):
         jq.from_matrix(3.0 * jnp.eye(3), atol=atol)
     np.testing.assert_allclose(jq.from_matrix(jnp.eye(3), atol=0.1), [1.0, 0, 0, 0])
+
+
+@pytest.mark.parametrize("delta", [1e-9, 1e-7, 2e-7])
+def test_from_matrix_of_a_nearly_orthogonal_matrix_is_the_nearest_rotation(delta):
+    """It gave the normalised Shepperd estimate, off by about 0.12·delta (scipy returns
+    the nearest rotation), with a derivative off the rotations."""
+    rng = np.random.default_rng(7)
+    for _ in range(20):
+        R0 = Rotation.random(random_state=rng).as_matrix()
+        S = rng.uniform(-1.0, 1.0, (3, 3))
+        M = R0 @ (np.eye(3) + delta * (S + S.T) / 2)
+        want = Rotation.from_matrix(M).as_quat(canonical=True, scalar_first=True)
+        got = np.asarray(jq.canonicalize(jq.from_matrix(jnp.asarray(M))))
+        np.testing.assert_allclose(got, want, atol=1e-15)
+    R0 = Rotation.from_rotvec([0.0, 0.0, 1.0]).as_matrix()
+    _, dq = jax.jvp(jq.from_matrix, (jnp.asarray(R0),),
+                    (jnp.asarray(R0 @ np.diag([1.0, 0.0, 0.0])),))
+    np.testing.assert_allclose(np.asarray(dq), 0.0, atol=1e-15)

@@ -89,8 +89,12 @@ def from_matrix(matrix: ArrayLike, *, atol: float | None = None) -> jax.Array:
     Input that is not a rotation is refused, never turned silently into one:
 
     * orthogonal within ``atol`` (``max |RᵀR - 1| ≤ atol``) and ``det R > 0``: converted.
-      A slightly non-orthogonal input (accumulated rounding) gives the normalised
-      Shepperd estimate, which agrees with the nearest rotation to first order;
+      A slightly non-orthogonal input (accumulated rounding) is first brought to the
+      nearest rotation (the polar factor, :func:`project_to_rotation`'s) by three
+      Newton–Schulz steps, ``R ← R (3 − RᵀR) / 2``, which converge quadratically: its
+      quaternion is that of the nearest rotation to about ``(atol)⁸`` (scipy's
+      ``Rotation.from_matrix`` to rounding at the default ``atol``), and its derivative
+      along a direction off the rotations is zero;
     * further from orthogonal (e.g. a scaled or sheared matrix): not converted. Call
       :func:`project_to_rotation` first to use the nearest rotation instead;
     * a reflection (orthogonal with ``det R = -1``): not converted; no rotation
@@ -136,8 +140,17 @@ def from_matrix(matrix: ArrayLike, *, atol: float | None = None) -> jax.Array:
             if bool(jnp.any(bad)):
                 where = f" at batch index {tuple(int(i) for i in jnp.argwhere(bad)[0])}"
                 raise ValueError(f"from_matrix: matrix{where if bad.ndim else ''} {what}")
-    q = _shepperd(m)
+    q = _shepperd(_polar_steps(m))
     return jnp.where((skewed | reflection | ~finite)[..., None], jnp.nan, q)
+
+
+def _polar_steps(m: jax.Array, steps: int = 3) -> jax.Array:
+    """``m (..., 3, 3)`` after ``steps`` Newton–Schulz iterations toward its polar factor
+    (the nearest orthogonal matrix), ``m ← m (3 − mᵀm) / 2``: each squares the distance
+    ``|mᵀm − 1|`` (up to a constant) while it is below 1; a rotation is a fixed point."""
+    for _ in range(steps):
+        m = m + 0.5 * (m - m @ (jnp.swapaxes(m, -1, -2) @ m))
+    return m
 
 
 def _shepperd(m: jax.Array) -> jax.Array:
