@@ -17,6 +17,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax.typing import ArrayLike
 
+from jrigid._folds import every
+
 
 def as_float(x: ArrayLike, *, weak: bool = False) -> jax.Array:
     """``x`` as a floating array (ints become the default float).
@@ -84,8 +86,8 @@ def all_arrays(*trees) -> bool:
 def all_finite(tree) -> jax.Array:
     """``()`` bool: every entry of every array leaf of ``tree`` is finite (True for a
     tree without leaves)."""
-    leaves = jax.tree_util.tree_leaves(tree)
-    return jnp.all(jnp.stack([jnp.all(jnp.isfinite(a)) for a in leaves] or [jnp.array(True)]))
+    flags = [every(jnp.isfinite(a)) for a in jax.tree_util.tree_leaves(tree)]
+    return every(jnp.stack(flags)) if flags else jnp.array(True)
 
 
 def float_dtype() -> np.dtype:

@@ -20,6 +20,7 @@ from jax.typing import ArrayLike
 from jrigid import inertia
 from jrigid import quaternion as quat
 from jrigid._checks import as_float, check_shape, is_traced
+from jrigid._folds import every, some
 
 __all__ = ["RigidBody"]
 
@@ -37,7 +38,7 @@ def _exactly(x: jax.Array, shape: tuple[int, ...], name: str, hint: str = "") ->
 def _frame_error(frame: jax.Array) -> jax.Array:
     """Whether ``frame`` is not a finite unit quaternion (within the default tolerance)."""
     tol = quat.default_atol(frame.dtype)
-    return ~(jnp.all(jnp.isfinite(frame)) & (jnp.abs(quat.norm(frame) - 1) <= tol))
+    return ~(every(jnp.isfinite(frame), axis=-1) & (jnp.abs(quat.norm(frame) - 1) <= tol))
 
 
 @functools.partial(jax.jit, static_argnums=4)
@@ -202,14 +203,14 @@ class RigidBody(eqx.Module):
         conditions = inertia.conditions(
             self.moments, kind="moments", allow_nonphysical=self.allow_nonphysical
         )
-        out = [(jnp.any(bad), f"inertia is not valid: {name}") for name, bad, _, _ in conditions]
+        out = [(some(bad), f"inertia is not valid: {name}") for name, bad, _, _ in conditions]
         out.append(
             (
-                ~jnp.all(jnp.isfinite(self.mass) & (self.mass > 0)),
+                ~every(jnp.isfinite(self.mass) & (self.mass > 0)),
                 "RigidBody: mass must be finite and positive",
             )
         )
-        out.append((~jnp.all(jnp.isfinite(self.com)), "RigidBody: com must be finite"))
+        out.append((~every(jnp.isfinite(self.com)), "RigidBody: com must be finite"))
         out.append(
             (
                 _frame_error(self.frame),

@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 
 from jrigid._checks import as_float, check_shape, fail_if, is_traced
+from jrigid._folds import every
 
 __all__ = [
     "conditions",
@@ -44,7 +45,9 @@ def _conditions(inertia: jax.Array, kind: str, allow_nonphysical: bool, rtol):
     eps = jnp.finfo(inertia.dtype).eps
     rtol = jnp.sqrt(eps) if rtol is None else rtol
     core = (-2, -1) if kind == "tensor" else (-1,)
-    finite = jnp.all(jnp.isfinite(inertia), axis=core)
+    finite = every(jnp.isfinite(inertia), axis=-1)
+    if kind == "tensor":
+        finite = every(finite, axis=-1)
     clean = jnp.where(jnp.isfinite(inertia), inertia, 0.0)
     out = [("values not finite", ~finite, "values", inertia)]
     ok = finite  # each element is reported under its first failed condition only

@@ -25,6 +25,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from jrigid._folds import total
+
 __all__ = ["Flat", "vector_lengths"]
 
 
@@ -40,7 +42,7 @@ def vector_lengths(y):
         a = jnp.asarray(a)
         if a.ndim == 0:
             return jnp.abs(a)
-        return jnp.broadcast_to(jnp.sqrt(jnp.sum(a * a, axis=-1, keepdims=True)), a.shape)
+        return jnp.broadcast_to(jnp.sqrt(total(a * a))[..., None], a.shape)
 
     return jax.tree_util.tree_map(one, y)
 

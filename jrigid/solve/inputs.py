@@ -23,6 +23,7 @@ import numpy as np
 
 from jrigid import quaternion as quat
 from jrigid._checks import is_traced
+from jrigid._folds import every, first_true, some
 from jrigid.scene import Gravity, Scene
 from jrigid.state import State
 
@@ -152,8 +153,8 @@ def shared_checks(ts, rtol, atol) -> list[tuple[jax.Array, str]]:
             + (" (or enable float64)" if jnp.finfo(rtol.dtype).bits < 64 else ""),
         ),
         (~jnp.isfinite(atol) | (atol < 0), "atol must be finite and >= 0"),
-        (~jnp.all(jnp.isfinite(ts)), "ts has non-finite entries"),
-        (jnp.any(jnp.diff(ts) <= 0), "ts must be strictly increasing"),
+        (~every(jnp.isfinite(ts)), "ts has non-finite entries"),
+        (some(jnp.diff(ts) <= 0), "ts must be strictly increasing"),
     ]
 
 
@@ -182,7 +183,7 @@ def input_checks(formulation, scene, state: State, ts, rtol, atol) -> list[tuple
     body (:meth:`jrigid.body.RigidBody.problems`) and the formulation's domain (e.g.
     gimbal lock of Euler angles).
     """
-    finite = lambda a: jnp.all(jnp.isfinite(a))  # noqa: E731
+    finite = lambda a: every(jnp.isfinite(a))  # noqa: E731
     n = quat.norm(state.q)  # scale-safe: |q| = 1e-300 or 1e300 is a valid orientation
     out = [
         *shared_checks(ts, rtol, atol),
@@ -309,7 +310,7 @@ def validate(formulation, scene, state, ts, rtol, atol) -> None:
 def guard(tree, checks: list[tuple[jax.Array, str]]):
     """``tree``, with one ``equinox.branched_error_if`` over a list of ``(bad, message)``."""
     bad = jnp.stack([b for b, _ in checks])
-    return eqx.branched_error_if(tree, jnp.any(bad), jnp.argmax(bad), [m for _, m in checks])
+    return eqx.branched_error_if(tree, some(bad), first_true(bad), [m for _, m in checks])
 
 
 def screen(checks, scene: Scene, state: State, ts, rtol, atol):
@@ -323,8 +324,8 @@ def screen(checks, scene: Scene, state: State, ts, rtol, atol):
     :attr:`~jrigid.trajectory.Result.invalid_input` by :func:`~jrigid.solve.outcome.finish`.
     """
     bad = jnp.stack([b for b, _ in checks])
-    invalid = jnp.any(bad)
-    cause = jnp.argmax(bad).astype(jnp.int32)
+    invalid = some(bad)
+    cause = first_true(bad)
     dtype = rtol.dtype
     pick = lambda good, a: jnp.where(invalid, jnp.asarray(good, a.dtype), a)  # noqa: E731
     body = scene.body

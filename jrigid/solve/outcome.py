@@ -15,6 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jrigid._checks import all_finite
+from jrigid._folds import first_true, largest
 from jrigid.solve.inputs import message
 from jrigid.trajectory import CAUSES, Result, SimulationError, Trajectory
 
@@ -100,8 +101,8 @@ def finish(scene, formulation, ts, saved_ts, saved_ys, sol_result, sol_stats,
     valid = saved_ts[:-1] == ts
     if invalid is not None:
         valid = valid & ~invalid
-    t_end = jnp.max(jnp.where(jnp.isfinite(saved_ts), saved_ts, -jnp.inf))
-    i_end = jnp.argmax(saved_ts == t_end)
+    t_end = largest(jnp.where(jnp.isfinite(saved_ts), saved_ts, -jnp.inf))
+    i_end = first_true(saved_ts == t_end)
     y_end = jax.tree_util.tree_map(lambda a: a[i_end], saved_ys)
 
     def _mask(a):

@@ -18,6 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jrigid._checks import all_finite, check_number, is_traced
+from jrigid._folds import rms_norm
 from jrigid.formulations import AbstractFormulation
 from jrigid.invariants import Invariants
 from jrigid.solve.flat import Flat, vector_lengths
@@ -449,7 +450,7 @@ def controller(ts, rtol, atol, norm=None, layout=None, cls=None, formulation=Non
     if formulation is not None:
         rtol, atol = formulation.step_tolerances(rtol, atol, eps)
         fields = dict(fields, acceptance=formulation.step_acceptance())
-    extra = {} if norm is None else {"norm": norm}
+    extra = {"norm": rms_norm if norm is None else norm}
     dtmin = 4 * eps * jnp.maximum(jnp.abs(ts[0]), jnp.abs(ts[-1]))
     if unit_time:
         fields = dict(fields, time_scale=ts[-1] - ts[0])
