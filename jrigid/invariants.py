@@ -43,6 +43,7 @@ import jax.numpy as jnp
 
 from jrigid import linalg
 from jrigid import quaternion as quat
+from jrigid._folds import largest, total
 from jrigid.scene import Scene, TopConstants
 from jrigid.state import Kinematics
 
@@ -95,10 +96,10 @@ RIDGE = 1e-8
 
 
 def _ridge(diagonal: list[jax.Array], relative) -> jax.Array:
-    largest = diagonal[0]
+    widest = diagonal[0]
     for d in diagonal[1:]:
-        largest = jnp.maximum(largest, d)
-    return relative * largest + jnp.finfo(largest.dtype).tiny
+        widest = jnp.maximum(widest, d)
+    return relative * widest + jnp.finfo(widest.dtype).tiny
 
 
 def _solve_spd3(a: list[list[jax.Array]], b: list[jax.Array]) -> jax.Array:
@@ -184,20 +185,21 @@ def top_gradients(scene: Scene, q: jax.Array, omega: jax.Array,
 
 def _top_rows(top: TopConstants, g_body: jax.Array, omega: jax.Array):
     """:func:`top_gradients` from the body-frame direction of gravity ``g_body (3,)``."""
-    L = jnp.sum(top.tensor * omega[None, :], axis=-1)
+    L = total(top.tensor * omega[None, :])
     d_theta = jnp.stack([linalg.cross(g_body, top.lever_weight), linalg.cross(L, g_body),
                          jnp.zeros_like(omega)])
-    d_omega = jnp.stack([L, jnp.sum(top.tensor * g_body[None, :], axis=-1),
-                         jnp.sum(top.tensor * top.r_hat[None, :], axis=-1)])
+    d_omega = jnp.stack([L, total(top.tensor * g_body[None, :]),
+                         total(top.tensor * top.r_hat[None, :])])
     return d_theta, d_omega
 
 
 def _project_top(top: TopConstants, targets: jax.Array, q: jax.Array, omega: jax.Array):
     """``(q, ω)`` restored onto a top's energy and momenta (one Newton step).
 
-    Written with reductions over whole vectors and the ``3 × 3`` normal equations as
-    arrays: the projection runs after every step, and in this form it compiles in a
-    third of the time of the same algebra written entry by entry."""
+    Written with sums over whole vectors (written out, :mod:`jrigid._folds`) and the
+    ``3 × 3`` normal equations as arrays: the projection runs after every step, and in
+    this form it compiles in a third of the time of the same algebra written entry by
+    entry."""
     g_body = quat.rotate_inverse(q, top.g_hat)
     here = top.conserved_at(g_body, omega)
     weight = jnp.where(here.active, 1.0 / jnp.where(here.active, here.scales, 1.0),
@@ -206,18 +208,18 @@ def _project_top(top: TopConstants, targets: jax.Array, q: jax.Array, omega: jax
     # L·r̂ is conserved only while the body is symmetric about its lever: its value is
     # restored, its derivative is not (see the module docstring)
     residual = residual.at[2].set(jax.lax.stop_gradient(residual[2]))
-    nu2 = jnp.maximum(jnp.sum(omega * omega) + top.pendulum2,
+    nu2 = jnp.maximum(total(omega * omega) + top.pendulum2,
                       jnp.sqrt(jnp.finfo(omega.dtype).tiny))
     d_theta, d_omega = _top_rows(top, g_body, omega)
     d_theta, d_omega = d_theta * weight[:, None], d_omega * weight[:, None]
-    gram = (jnp.sum(d_theta[:, None, :] * d_theta[None, :, :], axis=-1)
-            + nu2 * jnp.sum(d_omega[:, None, :] * d_omega[None, :, :], axis=-1))
-    ridge = RIDGE * jnp.max(jnp.diagonal(gram)) + jnp.finfo(omega.dtype).tiny
+    gram = (total(d_theta[:, None, :] * d_theta[None, :, :])
+            + nu2 * total(d_omega[:, None, :] * d_omega[None, :, :]))
+    ridge = RIDGE * largest(jnp.diagonal(gram)) + jnp.finfo(omega.dtype).tiny
     ridge = jnp.where(here.active[:3], ridge, 1.0)
     lam = _solve_spd3([[gram[i, j] + (ridge[i] if i == j else 0.0) for j in range(3)]
                        for i in range(3)], [residual[0], residual[1], residual[2]])
-    step_theta = -jnp.sum(lam[:, None] * d_theta, axis=0)
-    step_omega = -nu2 * jnp.sum(lam[:, None] * d_omega, axis=0)
+    step_theta = -total(lam[:, None] * d_theta, axis=0)
+    step_omega = -nu2 * total(lam[:, None] * d_omega, axis=0)
     return linalg.unit(_rotate_body(q, step_theta)), omega + step_omega
 
 

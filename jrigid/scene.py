@@ -31,6 +31,7 @@ import jax.numpy as jnp
 
 from jrigid import linalg
 from jrigid import quaternion as quat
+from jrigid._folds import first_true, largest, total
 from jrigid.body import RigidBody
 from jrigid.state import Kinematics
 
@@ -273,20 +274,20 @@ class TopConstants(eqx.Module):
         """:meth:`conserved` from the body-frame direction of gravity ``g_body (3,)``
         (``Rᵀ ĝ``) and body ``omega (3,)``.
 
-        Written with reductions over whole vectors (few operations, quick to compile:
-        a projection evaluates it at every step).
+        Written with sums over whole vectors (few operations, quick to compile: a
+        projection evaluates it at every step), written out (:mod:`jrigid._folds`).
         """
         dtype = omega.dtype
-        L = jnp.sum(self.tensor * omega[None, :], axis=-1)
-        kinetic = 0.5 * jnp.sum(omega * L)
-        potential = -jnp.sum(g_body * self.lever_weight)  # −M g·(R r)
-        momentum = _length(jnp.sum(L * L)) + self.momentum_floor
-        values = jnp.stack([kinetic + potential, jnp.sum(L * g_body), jnp.sum(L * self.r_hat),
+        L = total(self.tensor * omega[None, :])
+        kinetic = 0.5 * total(omega * L)
+        potential = -total(g_body * self.lever_weight)  # −M g·(R r)
+        momentum = _length(total(L * L)) + self.momentum_floor
+        values = jnp.stack([kinetic + potential, total(L * g_body), total(L * self.r_hat),
                             jnp.zeros((), dtype)])
         scales = jnp.stack([kinetic + self.weight, momentum, momentum, jnp.ones((), dtype)])
         # without gravity (|g| = 0, ĝ = 0) L·ĝ says nothing; a slot whose scale is zero (a
         # body at rest with no weight) has nothing to restore
-        pulled = jnp.sum(self.g_hat * self.g_hat) > 0
+        pulled = total(self.g_hat * self.g_hat) > 0
         active = jnp.stack([jnp.array(True), pulled, self.symmetric, jnp.array(False)])
         return Conserved(values, scales, active & (scales > 0))
 
@@ -375,7 +376,7 @@ class Scene(eqx.Module):
             deltas = [
                 sum(m[j] * (m[k] - m[j]) * w2[j] for j in range(3) if j != k) for k in range(3)
             ]
-            nearest = jnp.argmax(jnp.abs(L))
+            nearest = first_true(jnp.abs(L) == largest(jnp.abs(L)))  # argmax, written out
             active = jnp.stack([jnp.array(True), nearest == 0, nearest == 1, nearest == 2])
             return Conserved(jnp.stack([L2, *deltas]), jnp.full(4, L2), active)
         if not self.conservative_top:
@@ -400,15 +401,15 @@ class Scene(eqx.Module):
         r_norm = _length(linalg.dot(r, r))
         r_hat = r / jnp.where(r_norm > 0, r_norm, 1.0)
         weight = self.body.mass * g_norm * r_norm
-        largest = jnp.max(jnp.diagonal(tensor))
+        widest = largest(jnp.diagonal(tensor))
         return TopConstants(
             tensor=tensor,
             g_hat=g / jnp.where(g_norm > 0, g_norm, 1.0),  # zero without gravity
             lever_weight=self.body.mass * g_norm * r,
             r_hat=r_hat,
             weight=weight,
-            momentum_floor=_length(largest * weight),
-            pendulum2=weight / largest,
+            momentum_floor=_length(widest * weight),
+            pendulum2=weight / widest,
             symmetric=self.symmetric_about_lever(),
         )
 
