@@ -196,7 +196,7 @@ def _top_rows(top: TopConstants, g_body: jax.Array, omega: jax.Array):
 def _project_top(top: TopConstants, targets: jax.Array, q: jax.Array, omega: jax.Array):
     """``(q, ω)`` restored onto a top's energy and momenta (one Newton step).
 
-    Written with sums over whole vectors (written out, :mod:`jrigid._folds`) and the
+    Written with sums over whole vectors (written out, ``jrigid._folds``) and the
     ``3 × 3`` normal equations as arrays: the projection runs after every step, and in
     this form it compiles in a third of the time of the same algebra written entry by
     entry."""

@@ -275,7 +275,7 @@ class TopConstants(eqx.Module):
         (``Rᵀ ĝ``) and body ``omega (3,)``.
 
         Written with sums over whole vectors (few operations, quick to compile: a
-        projection evaluates it at every step), written out (:mod:`jrigid._folds`).
+        projection evaluates it at every step), written out (``jrigid._folds``).
         """
         dtype = omega.dtype
         L = total(self.tensor * omega[None, :])
