@@ -5,11 +5,11 @@ XLA:CPU gives each reduction in a program buffers of its own (its reducer's scal
 and every call of the program pays for them, whether the reduction runs once, in every
 step of a loop, or not at all: about 0.2 µs per reduction per call on this project's
 machines (measured in a one-kernel program: 40 reductions of 7 entries added 8 µs to a
-call, 0.67 µs to each of its loop's iterations). A default solve held 34 of them (its
-input checks, the step-size control, the stage sums), most over 2–16 entries. Written
-out as ``&``, ``|``, ``max`` and ``+`` of slices, they join their neighbours' fused
-loops and cost nothing per call. Longer axes (more than ``SMALL`` entries, e.g. many
-output times) keep the reduction.
+call, 0.67 µs to each of its loop's iterations). A default solve held 26 (free rotor)
+to 29 (heavy top) of them (its input checks, the step-size control, the projection, the
+outcome), nearly all over 2–16 entries. Written out as ``&``, ``|``, ``max`` and ``+``
+of slices, they join their neighbours' fused loops and cost nothing per call. Longer
+axes (more than ``SMALL`` entries, e.g. many output times) keep the reduction.
 """
 
 from __future__ import annotations
