@@ -179,7 +179,8 @@ def canonicalize(q: ArrayLike) -> jax.Array:
 
     ``w > 0``; at a 180° rotation (``w = 0``) the first non-zero of ``x, y, z`` is made
     positive, as in ``Rotation.as_quat(canonical=True)``. So ``canonicalize(q)`` and
-    ``canonicalize(-q)`` are equal, bit for bit, for every ``q`` (``-0.0`` counts as zero).
+    ``canonicalize(-q)`` are equal, bit for bit, for every non-zero ``q`` (``-0.0`` counts
+    as zero; the zero quaternion, no rotation, keeps its signs).
 
     Args:
         q: ``(..., 4)``.
