@@ -23,7 +23,7 @@ import jax.numpy as jnp
 from jax.typing import ArrayLike
 
 from jrigid import inertia
-from jrigid._checks import as_floats, check_shape, fail_if
+from jrigid._checks import as_floats, check_shape, fail_if, is_traced
 
 __all__ = ["encircled_axis", "omega_at_energy", "polhode", "polhode_family", "separatrix_offset"]
 
@@ -79,13 +79,21 @@ def encircled_axis(moments: ArrayLike, omega: ArrayLike) -> jax.Array:
 
     Args:
         moments: ``(..., 3)`` principal moments, any order, positive.
-        omega: ``(..., 3)`` body angular velocity.
+        omega: ``(..., 3)`` body angular velocity, finite.
 
     Returns:
-        ``(...)`` int32 (the broadcast batch shape).
+        ``(...)`` int32 (the broadcast batch shape); ``-1`` where ``omega`` is not finite
+        (under ``jit``/``vmap``; concrete input raises).
+
+    Raises:
+        ValueError: concrete ``omega`` with a NaN or infinite entry.
     """
     delta, order = _offset(moments, omega)
-    return jnp.where(delta >= 0, order[..., 2], order[..., 0]).astype(jnp.int32)
+    finite = jnp.isfinite(delta)
+    if not is_traced(finite) and not bool(jnp.all(finite)):
+        raise ValueError(f"encircled_axis: omega must be finite, got {omega}")
+    axis = jnp.where(delta >= 0, order[..., 2], order[..., 0])
+    return jnp.where(finite, axis, -1).astype(jnp.int32)
 
 
 def separatrix_offset(moments: ArrayLike, omega: ArrayLike) -> jax.Array:

@@ -147,10 +147,12 @@ def flips_expected(moments: ArrayLike, omega: ArrayLike) -> jax.Array:
         omega: ``(..., 3)`` body angular velocity.
 
     Returns:
-        ``(...)`` bool (the broadcast batch shape).
+        ``(...)`` bool (the broadcast batch shape); False where ``omega`` is not finite
+        (under ``jit``/``vmap``; concrete non-finite input raises ``ValueError``).
     """
-    steady = separatrix_offset(moments, omega) == 0
-    return (nearest_axis(omega) != encircled_axis(moments, omega)) & ~steady
+    offset = separatrix_offset(moments, omega)
+    turning = (nearest_axis(omega) != encircled_axis(moments, omega)) & (offset != 0)
+    return turning & jnp.isfinite(offset)  # (False for a non-finite omega under jit)
 
 
 # --------------------------------------------------------------------------- per trajectory

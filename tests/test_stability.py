@@ -424,3 +424,16 @@ def test_flip_intervals_need_distinct_moments(moments):
         stability.flip_time_asymptotic(jnp.array(moments), 1.0, 0.01)
     with pytest.raises(ValueError, match="moments must be distinct"):
         theory.flip_interval(jnp.array(moments), jnp.array([0.01, 1.0, 0.0]))
+
+
+def test_a_non_finite_spin_encircles_no_axis():
+    """A NaN ω gave axis 0 (the comparison with the separatrix was False) and so
+    "flips expected": a plausible classification of no motion at all."""
+    m = jnp.array([1.0, 2.0, 3.0])
+    bad = jnp.array([jnp.nan, 1.0, 0.0])
+    with pytest.raises(ValueError, match="omega must be finite"):
+        stability.encircled_axis(m, bad)
+    assert int(jax.jit(stability.encircled_axis)(m, bad)) == -1
+    both = jnp.stack([bad, jnp.array([0.01, 1.0, 0.0])])
+    flips = jax.vmap(lambda w: stability.flips_expected(m, w))(both)
+    assert flips.tolist() == [False, True]
