@@ -1,7 +1,10 @@
 """The mechanics of one impact: contact points, the collision matrix, the impulse.
 
-Pure functions of one body's state (``jit``/``vmap``/``grad``-able, no checks), used by
-:func:`jrigid.contact.simulate_bounces` at every contact.
+Pure functions of one body's state (``jit``/``vmap``/``grad``-able), used by
+:func:`jrigid.contact.simulate_bounces` at every contact. Their arguments' shapes are
+checked (one body: use ``jax.vmap`` for a batch), and so are their values when they are
+concrete (a positive mass and moments, ``e`` in ``[0, 1]``, ``μ ≥ 0``, a non-zero
+normal): ``ValueError``. Traced values are not checked (no cost inside a solver's loop).
 
 **Impulse model** (space frame; ``r`` from the centre of mass to the contact point,
 ``n = e_z`` the floor normal, ``u = v + ω_s × r`` the velocity of the contact point).
@@ -35,7 +38,7 @@ from jax.typing import ArrayLike
 
 from jrigid import linalg
 from jrigid import quaternion as quat
-from jrigid._checks import as_float
+from jrigid._checks import as_float, is_traced
 
 __all__ = [
     "apply_impulse",
@@ -115,6 +118,33 @@ def _inverse_inertia_space(moments: jax.Array, q: jax.Array) -> jax.Array:
     return (R / moments[None, :]) @ R.T
 
 
+def _checked(**args) -> dict:
+    """``args`` as float arrays of their exact shapes (``mass``, ``restitution``,
+    ``friction``: ``()``; ``moments``, vectors: ``(3,)``; ``q``: ``(4,)``), their values
+    checked where concrete. ``ValueError`` naming the first that fails."""
+    shapes = {"mass": (), "restitution": (), "friction": (), "q": (4,)}
+    out = {}
+    for name, x in args.items():
+        x = as_float(x)
+        shape = shapes.get(name, (3,))
+        if x.shape != shape:
+            raise ValueError(f"impacts: {name} must have shape {shape} (one body; "
+                             f"jax.vmap for a batch), got {x.shape}")
+        out[name] = x
+    values = {k: np.asarray(v) for k, v in out.items() if not is_traced(v)}
+    rules = {
+        "mass": (lambda m: np.isfinite(m) & (m > 0), "finite and > 0"),
+        "moments": (lambda m: np.all(np.isfinite(m) & (m > 0)), "finite and > 0"),
+        "restitution": (lambda e: (e >= 0) & (e <= 1), "in [0, 1]"),
+        "friction": (lambda f: np.isfinite(f) & (f >= 0), "finite and >= 0"),
+        "normal": (lambda n: np.all(np.isfinite(n)) & np.any(n != 0), "finite and non-zero"),
+    }
+    for name, (ok, what) in rules.items():
+        if name in values and not bool(ok(values[name])):
+            raise ValueError(f"impacts: {name} must be {what}, got {values[name]}")
+    return out
+
+
 def collision_matrix(mass, moments, q, r) -> jax.Array:
     """``K = 1/M − [r]× I_s⁻¹ [r]×``: contact-point velocity change per unit impulse.
 
@@ -127,9 +157,10 @@ def collision_matrix(mass, moments, q, r) -> jax.Array:
     Returns:
         ``(3, 3)`` symmetric positive definite ``K`` with ``Δu = K P``.
     """
-    S = _skew(as_float(r))
+    a = _checked(mass=mass, moments=moments, q=q, r=r)
+    S = _skew(a["r"])
     eye = jnp.eye(3, dtype=S.dtype)
-    return eye / mass - S @ _inverse_inertia_space(as_float(moments), as_float(q)) @ S
+    return eye / a["mass"] - S @ _inverse_inertia_space(a["moments"], a["q"]) @ S
 
 
 def effective_mass(mass, moments, q, r, normal) -> jax.Array:
@@ -145,7 +176,7 @@ def effective_mass(mass, moments, q, r, normal) -> jax.Array:
     Returns:
         ``()``.
     """
-    n = as_float(normal)
+    n = _checked(normal=normal)["normal"]
     return 1.0 / jnp.dot(n, collision_matrix(mass, moments, q, r) @ n)
 
 
@@ -168,7 +199,10 @@ def contact_impulse(mass, moments, q, v, omega, r, normal, restitution, friction
     Returns:
         ``(3,)`` impulse on the body, space frame (batch with ``jax.vmap``).
     """
-    q, v, omega, r, n = (as_float(a) for a in (q, v, omega, r, normal))
+    a = _checked(q=q, v=v, omega=omega, r=r, normal=normal, restitution=restitution,
+                 friction=friction)
+    q, v, omega, r, n = (a[k] for k in ("q", "v", "omega", "r", "normal"))
+    restitution, friction = a["restitution"], a["friction"]
     K = collision_matrix(mass, moments, q, r)
     u = v + jnp.cross(quat.rotate(q, omega), r)
     un = jnp.dot(u, n)
@@ -220,6 +254,7 @@ def apply_impulse(mass, moments, q, v, omega, r, impulse) -> tuple[jax.Array, ja
     Returns:
         ``(v (3,), ω (3,) body frame)``.
     """
-    q, v, omega, r, impulse = (as_float(a) for a in (q, v, omega, r, impulse))
+    a = _checked(mass=mass, moments=moments, q=q, v=v, omega=omega, r=r, impulse=impulse)
+    q, v, omega, r, impulse = (a[k] for k in ("q", "v", "omega", "r", "impulse"))
     dL_body = quat.rotate_inverse(q, jnp.cross(r, impulse))
-    return v + impulse / mass, omega + dL_body / moments
+    return v + impulse / a["mass"], omega + dL_body / a["moments"]

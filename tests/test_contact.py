@@ -488,3 +488,22 @@ def test_tracing_simulate_bounces_is_refused_with_the_remedy():
 
     with pytest.raises(TypeError, match="cannot be traced.*jrigid.impacts"):
         jax.grad(height)(2.0)
+
+
+@pytest.mark.parametrize("change, message", [
+    (dict(restitution=2.0), "restitution must be in"),
+    (dict(friction=-1.0), "friction must be finite and >= 0"),
+    (dict(mass=0.0), "mass must be finite and > 0"),
+    (dict(normal=jnp.zeros(3)), "normal must be finite and non-zero"),
+    (dict(r=jnp.zeros(4)), r"r must have shape \(3,\)"),
+    (dict(q=jnp.ones((2, 4))), r"q must have shape \(4,\)"),
+])
+def test_impact_functions_refuse_bad_arguments(change, message):
+    """They took any shape and any value: an r of four entries, e = 2 (an impact that
+    doubles the energy), μ < 0 (a cone of negative width), a zero normal (no impulse)."""
+    args = dict(mass=1.0, moments=jnp.array([1.0, 2.0, 2.5]), q=jnp.array([1.0, 0, 0, 0]),
+                v=jnp.array([0.0, 0.0, -1.0]), omega=jnp.zeros(3), r=jnp.array([0.0, 0, -1]),
+                normal=jnp.array([0.0, 0, 1]), restitution=0.5, friction=0.3)
+    np.testing.assert_allclose(impacts.contact_impulse(**args), [0.0, 0.0, 1.5], atol=1e-12)
+    with pytest.raises(ValueError, match=message):
+        impacts.contact_impulse(**{**args, **change})
