@@ -589,3 +589,15 @@ def test_axis_of_a_rotation_by_a_subnormal_size_angle_is_kept():
     axis, angle = jq.to_axis_angle(jnp.array([1.0, 0.0, 3e-200, 4e-200]))
     np.testing.assert_allclose(np.asarray(axis), [0.0, 0.6, 0.8], rtol=1e-15)
     np.testing.assert_allclose(float(angle), 1e-199, rtol=1e-15)
+
+
+@pytest.mark.parametrize("exponent", [-120, -100, -69, -60, 0, 60, 120])
+def test_rotations_near_the_identity_at_any_scale(exponent):
+    """A quaternion near the identity scaled by 1e-60…1e-120 (the product of two scaled
+    by 1e-60 in squared_distance) gave NaN: the Taylor branch of to_rotvec divided by
+    w³, which underflows."""
+    scale = 10.0**exponent
+    q = jnp.array([1.0, 1e-9, 0.0, 0.0]) * scale
+    np.testing.assert_allclose(jq.to_rotvec(q), [2e-9, 0.0, 0.0], rtol=1e-12, atol=0)
+    p = jnp.array([0.8, 0.2, 0.1, 0.3]) * scale
+    assert float(jq.squared_distance(p, p)) <= 1e-30  # (rounding: an angle of ~1e-17)

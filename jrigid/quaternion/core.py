@@ -362,8 +362,8 @@ def to_rotvec(q: ArrayLike) -> jax.Array:
     n = jnp.sqrt(jnp.where(small, jnp.ones_like(n2), n2))
     w_safe = jnp.where(small, w, jnp.ones_like(w))
     k = jnp.where(
-        small,
-        2.0 / w_safe - 2.0 * n2 / (3.0 * w_safe**3),
+        small,  # (2 / w)(1 − n² / 3w²): no w³, which underflows for |q| below 1e-103
+        (2.0 / w_safe) * (1.0 - n2 / (3.0 * w_safe * w_safe)),
         2.0 * jnp.arctan2(n, w) / n,
     )
     return k[..., None] * v
