@@ -41,8 +41,9 @@ class ParameterError(ValueError):
     Raised by :func:`parse_params`, and by an experiment's ``main`` for a value it
     refuses before it runs (a ``ValueError``, so Python callers catch it as one).
     ``jrigid run`` reports it as a usage error (exit code 2), and leaves the results
-    folder of an earlier run as it was; any other exception is the experiment's failure
-    (a traceback, exit code 1).
+    folder of an earlier run as it was; so it does a ``ValueError`` raised before the
+    experiment wrote its first file (``jrigid.registry.run``). Any other exception is the
+    experiment's failure (a traceback, exit code 1).
     """
 
 
