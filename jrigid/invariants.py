@@ -208,7 +208,7 @@ def _project_top(top: TopConstants, targets: jax.Array, q: jax.Array, omega: jax
     # L·r̂ is conserved only while the body is symmetric about its lever: its value is
     # restored, its derivative is not (see the module docstring)
     residual = residual.at[2].set(jax.lax.stop_gradient(residual[2]))
-    nu2 = jnp.maximum(total(omega * omega) + top.pendulum2,
+    nu2 = jnp.maximum(linalg.norm2(omega) + top.pendulum2,
                       jnp.sqrt(jnp.finfo(omega.dtype).tiny))
     d_theta, d_omega = _top_rows(top, g_body, omega)
     d_theta, d_omega = d_theta * weight[:, None], d_omega * weight[:, None]

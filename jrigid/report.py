@@ -31,6 +31,8 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import quote
 
+from jrigid._files import write_atomic
+
 __all__ = ["IMAGE_SUFFIXES", "Report", "to_jsonable", "format_number"]
 
 #: File name endings :meth:`Report.figure` keeps (matplotlib's formats); any other name
@@ -171,7 +173,8 @@ class Report:
         """
         merged = {**self._numbers, **to_jsonable({**(values or {}), **more})}
         path = self.out_dir / "numbers.json"
-        _write_text(path, json.dumps(merged, indent=2, allow_nan=False) + "\n")
+        text = json.dumps(merged, indent=2, allow_nan=False) + "\n"
+        write_atomic(path, lambda fh: fh.write(text.encode()))  # whole, or the old file
         self._numbers = merged  # (only once all of them could be stored)
         return path
 
@@ -214,16 +217,6 @@ class Report:
             parts.append(text.strip())
         parts.extend(self._blocks)
         path = self.out_dir / self.summary_name
-        _write_text(path, "\n\n".join(parts) + "\n")
+        summary = "\n\n".join(parts) + "\n"
+        write_atomic(path, lambda fh: fh.write(summary.encode()))
         return path
-
-
-def _write_text(path: Path, text: str) -> None:
-    """Write ``text`` to a temporary file next to ``path``, then rename it onto ``path``:
-    an interrupted run leaves the previous file or the new one, never half of it."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        tmp.write_text(text)
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)

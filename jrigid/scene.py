@@ -279,15 +279,15 @@ class TopConstants(eqx.Module):
         """
         dtype = omega.dtype
         L = total(self.tensor * omega[None, :])
-        kinetic = 0.5 * total(omega * L)
-        potential = -total(g_body * self.lever_weight)  # −M g·(R r)
-        momentum = _length(total(L * L)) + self.momentum_floor
-        values = jnp.stack([kinetic + potential, total(L * g_body), total(L * self.r_hat),
+        kinetic = 0.5 * linalg.dot(omega, L)
+        potential = -linalg.dot(g_body, self.lever_weight)  # −M g·(R r)
+        momentum = _length(linalg.norm2(L)) + self.momentum_floor
+        values = jnp.stack([kinetic + potential, linalg.dot(L, g_body), linalg.dot(L, self.r_hat),
                             jnp.zeros((), dtype)])
         scales = jnp.stack([kinetic + self.weight, momentum, momentum, jnp.ones((), dtype)])
         # without gravity (|g| = 0, ĝ = 0) L·ĝ says nothing; a slot whose scale is zero (a
         # body at rest with no weight) has nothing to restore
-        pulled = total(self.g_hat * self.g_hat) > 0
+        pulled = linalg.norm2(self.g_hat) > 0
         active = jnp.stack([jnp.array(True), pulled, self.symmetric, jnp.array(False)])
         return Conserved(values, scales, active & (scales > 0))
 
@@ -376,7 +376,8 @@ class Scene(eqx.Module):
             deltas = [
                 sum(m[j] * (m[k] - m[j]) * w2[j] for j in range(3) if j != k) for k in range(3)
             ]
-            nearest = first_true(jnp.abs(L) == largest(jnp.abs(L)))  # argmax, written out
+            size = jnp.abs(L)
+            nearest = first_true(size == largest(size))  # argmax, written out
             active = jnp.stack([jnp.array(True), nearest == 0, nearest == 1, nearest == 2])
             return Conserved(jnp.stack([L2, *deltas]), jnp.full(4, L2), active)
         if not self.conservative_top:

@@ -25,12 +25,13 @@ import os
 import pathlib
 import platform
 import re
-import threading
 import time
 from importlib import metadata as importlib_metadata
 from typing import Any
 
 import numpy as np
+
+from jrigid._files import write_atomic
 
 __all__ = [
     "CHUNK_PATTERN",
@@ -105,19 +106,6 @@ def chunk_path(out_dir: pathlib.Path, index: int) -> pathlib.Path:
     """``out_dir / chunk_{index:05d}.npz``."""
     return out_dir / CHUNK_PATTERN.format(index)
 
-
-def write_atomic(path: pathlib.Path, write) -> None:
-    """Call ``write(fh)`` on a temporary file next to ``path``, fsync, rename onto ``path``."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}.tmp")
-    try:
-        with open(tmp, "wb") as fh:
-            write(fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
 
 
 def run_id(meta: dict[str, Any]) -> str:
